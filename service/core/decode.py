@@ -1,0 +1,138 @@
+"""The constraint-guaranteed decoder shared by the learned model and the baselines.
+
+From positive node bids b (S, V) and per-conflict following scores (S, M) it
+builds assignments that are acyclic and density-feasible for *any* input:
+
+* rank r_v = b_v + sum of the bids of v's predecessors on its robot's path, so
+  ranks strictly increase along every path; every conflict points from the
+  lower to the higher (rank, node index), a strict total order that agrees with
+  every path, hence the node graph is a DAG;
+* following-type conflicts are chosen greedily by descending score (ties by
+  conflict index) while every density clique containing the conflict still has
+  budget, hence every clique stays within its budget.
+
+The converse also holds (tested): every acyclic assignment comes from the bids
+``bids_from_ranks(topological positions)`` and every density-feasible type
+choice from scores 1 (following) / 0 (exclusive) with threshold 0.5.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from service.core.assignment import Assignments
+from service.core.cliques import Cliques
+from service.core.problem import Problem
+
+__all__ = ["Decoder", "bids_from_ranks"]
+
+# Budget of the padding clique in the edge -> clique table: never binds.
+_UNBOUNDED = np.iinfo(np.int64).max // 2
+
+
+def bids_from_ranks(problem: Problem, ranks: np.ndarray) -> np.ndarray:
+    """Bids whose chain sums give back ``ranks`` (strictly increasing along each path).
+
+    Shapes: ranks (S, V) or (V,) -> bids of the same shape. The first node's bid
+    is its rank, so ranks must be positive.
+    """
+    ranks = np.asarray(ranks, dtype=np.float64)
+    bids = ranks.copy()
+    first = np.zeros(problem.n_nodes, dtype=bool)
+    first[problem.robot_start[:-1]] = True
+    bids[..., ~first] = np.diff(ranks, axis=-1)[..., ~first[1:]]
+    return bids
+
+
+class Decoder:
+    """Decodes bids and scores of one problem into valid assignments."""
+
+    def __init__(self, problem: Problem, cliques: Cliques) -> None:
+        self.problem = problem
+        self.cliques = cliques
+        counts = np.diff(problem.robot_start)
+        self._chain_width = int(counts.max())  # L, longest path in nodes
+        rank_in_robot = np.arange(problem.n_nodes) - problem.robot_start[problem.node_robot]
+        self._chain_slot = problem.node_robot * self._chain_width + rank_in_robot  # (V,)
+        self._forbidden = cliques.forbidden()  # (M,)
+        self._build_binding_table()
+
+    def _build_binding_table(self) -> None:
+        """Conflicts inside binding cliques, each with its padded list of those cliques."""
+        cl = self.cliques
+        binding = cl.binding()  # (Q,)
+        inc_clique = cl.clique_of_incidence  # (E,)
+        keep = binding[inc_clique]
+        edges, cliques = cl.edge[keep], inc_clique[keep]
+        order = np.lexsort((cliques, edges))
+        edges, cliques = edges[order], cliques[order]
+        self._bound_edges, first = np.unique(edges, return_index=True)  # (B,)
+        n_bound = self._bound_edges.size
+        per_edge = np.diff(np.append(first, edges.size))
+        pad_width = int(per_edge.max()) if n_bound else 1
+        table = np.full((n_bound, pad_width), cl.budget.size, dtype=np.int64)  # pad -> extra clique
+        column = np.arange(edges.size) - np.repeat(first, per_edge)
+        table[np.repeat(np.arange(n_bound), per_edge), column] = cliques
+        self._bound_cliques = table  # (B, P) clique indices, padded with Q
+        self._budget = np.append(cl.budget, _UNBOUNDED)  # (Q+1,)
+
+    def ranks(self, bids: np.ndarray) -> np.ndarray:
+        """Chain sums of bids. Shapes: bids (S, V) positive -> ranks (S, V)."""
+        bids = np.atleast_2d(np.asarray(bids, dtype=np.float64))
+        if np.any(~(bids > 0)):
+            raise ValueError("bids must be positive and finite")
+        n_samples = bids.shape[0]
+        padded = np.zeros((n_samples, self.problem.n_robots * self._chain_width))
+        padded[:, self._chain_slot] = bids
+        shape = (n_samples, self.problem.n_robots, self._chain_width)
+        return np.cumsum(padded.reshape(shape), axis=2).reshape(n_samples, -1)[:, self._chain_slot]
+
+    def directions(self, ranks: np.ndarray) -> np.ndarray:
+        """a_first (S, M) bool from node ranks (S, V) non-decreasing along each path."""
+        ranks = np.atleast_2d(ranks)
+        ra, rb = ranks[:, self.problem.conf_a], ranks[:, self.problem.conf_b]
+        return (ra < rb) | ((ra == rb) & (self.problem.conf_a < self.problem.conf_b))
+
+    def types(self, scores: np.ndarray, threshold: float | None = None) -> np.ndarray:
+        """following (S, M) bool: greedy by descending score within every clique budget.
+
+        Only conflicts scoring above ``threshold`` are candidates (all, if None).
+        """
+        scores = np.atleast_2d(np.asarray(scores, dtype=np.float64))
+        candidate = ~self._forbidden & ~np.isnan(scores)
+        if threshold is not None:
+            candidate &= scores > threshold
+        following = candidate.copy()
+        if self._bound_edges.size:
+            following[:, self._bound_edges] = self._greedy(scores, candidate)
+        return following
+
+    def _greedy(self, scores: np.ndarray, candidate: np.ndarray) -> np.ndarray:
+        """Greedy budgeted choice over the binding conflicts -> (S, B) bool."""
+        n_samples = scores.shape[0]
+        rows = np.arange(n_samples)
+        bound = self._bound_edges
+        # Descending score, ties by conflict index (stable sort of the negated score).
+        order = np.argsort(-scores[:, bound], axis=1, kind="stable")  # (S, B)
+        budget = np.broadcast_to(self._budget, (n_samples, self._budget.size)).copy()
+        chosen = np.zeros((n_samples, bound.size), dtype=bool)
+        cand = candidate[:, bound]
+        for k in range(bound.size):
+            e = order[:, k]  # (S,) local index of each sample's k-th best conflict
+            cliques = self._bound_cliques[e]  # (S, P)
+            ok = cand[rows, e] & np.all(budget[rows[:, None], cliques] > 0, axis=1)
+            budget[rows[:, None], cliques] -= ok[:, None]
+            chosen[rows, e] = ok
+        return chosen
+
+    def decode(
+        self, bids: np.ndarray, scores: np.ndarray, threshold: float | None = None
+    ) -> Assignments:
+        """Assignments (S of them) from bids (S, V) > 0 and scores (S, M)."""
+        return self.decode_ranks(self.ranks(bids), scores, threshold)
+
+    def decode_ranks(
+        self, ranks: np.ndarray, scores: np.ndarray, threshold: float | None = None
+    ) -> Assignments:
+        """Assignments from ranks (S, V) non-decreasing along each path and scores (S, M)."""
+        return Assignments(self.directions(ranks), self.types(scores, threshold))

@@ -1,0 +1,382 @@
+"""The validated problem model: a coordination skeleton graph in numpy arrays.
+
+A :class:`Problem` is built once per request from a :class:`ScheduleRequest`
+by :func:`problem_from_request`, which enforces every cross-field input rule
+of the contract and reports each violation with the location of the field at
+fault. Everything downstream (evaluator, decoder, checker, solvers) reads only
+these arrays, never the wire model.
+
+Indexing: robots ``0..R-1`` in request order; nodes ``0..V-1`` grouped by robot
+and in path order (``robot_start[r] <= v < robot_start[r+1]``); conflicts
+``0..M-1`` in request order with sides ``a`` and ``b``; time points ``0..P-1``
+grouped by robot, sorted within each robot (``tp_start[r] <= t < tp_start[r+1]``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from service.core.schemas import ScheduleRequest
+
+__all__ = ["DensityLimit", "ErrorItem", "Problem", "ProblemError", "problem_from_request"]
+
+Loc = tuple[str | int, ...]
+# How many input violations one error response lists at most.
+MAX_REPORTED_ERRORS = 50
+
+
+@dataclass(frozen=True)
+class ErrorItem:
+    """One input violation: where it is (FastAPI-style ``loc``) and what is wrong."""
+
+    loc: Loc
+    msg: str
+    type: str = "value_error"
+
+    def as_dict(self) -> dict[str, Any]:
+        """Render like a FastAPI validation error entry."""
+        return {"loc": list(self.loc), "msg": self.msg, "type": self.type}
+
+
+class ProblemError(ValueError):
+    """The request is well-typed but breaks a rule of the contract."""
+
+    def __init__(self, errors: Sequence[ErrorItem]) -> None:
+        self.errors = list(errors)
+        super().__init__("; ".join(f"{'.'.join(map(str, e.loc))}: {e.msg}" for e in self.errors))
+
+
+@dataclass(frozen=True)
+class DensityLimit:
+    """An explicit density clique: node indices and the robots allowed in it at once."""
+
+    nodes: np.ndarray  # (k,) int, sorted node indices
+    max_robots: int
+
+
+@dataclass(frozen=True, eq=False)
+class Problem:
+    """A validated coordination skeleton graph.
+
+    Shapes: R robots, V nodes, M conflicts, P time points.
+    """
+
+    robot_ids: tuple[str, ...]
+    node_ids: tuple[str, ...]
+    robot_start: np.ndarray  # (R+1,) int, nodes of robot r are robot_start[r]:robot_start[r+1]
+    node_robot: np.ndarray  # (V,) int
+    node_enter: np.ndarray  # (V,) float
+    node_exit: np.ndarray  # (V,) float
+    node_density: np.ndarray  # (V,) int >= 1
+    goal_time: np.ndarray  # (R,) float, NaN where not given
+    conf_a: np.ndarray  # (M,) int node index of side a
+    conf_b: np.ndarray  # (M,) int node index of side b
+    pair_enter: np.ndarray  # (M, 2) float, column 0 side a, column 1 side b
+    pair_exit: np.ndarray  # (M, 2) float
+    density_limits: tuple[DensityLimit, ...]
+    tp_time: np.ndarray  # (P,) float, sorted within each robot
+    tp_start: np.ndarray  # (R+1,) int
+    tp_pair_enter: np.ndarray  # (M, 2) int time point of each side's pair enter
+    tp_pair_exit: np.ndarray  # (M, 2) int
+    tp_node_enter: np.ndarray  # (V,) int
+    tp_node_exit: np.ndarray  # (V,) int
+    node_index: dict[str, int] = field(repr=False)
+
+    @property
+    def n_robots(self) -> int:
+        return len(self.robot_ids)
+
+    @property
+    def n_nodes(self) -> int:
+        return len(self.node_ids)
+
+    @property
+    def n_conflicts(self) -> int:
+        return int(self.conf_a.shape[0])
+
+    @property
+    def conf_nodes(self) -> np.ndarray:
+        """(M, 2) int: node index of side a and side b of every conflict."""
+        return np.stack([self.conf_a, self.conf_b], axis=1)
+
+    @property
+    def tp_robot(self) -> np.ndarray:
+        """(P,) int: the robot each time point belongs to."""
+        return np.repeat(np.arange(self.n_robots), np.diff(self.tp_start))
+
+    @property
+    def last_tp(self) -> np.ndarray:
+        """(R,) int: each robot's last (completion) time point."""
+        return self.tp_start[1:] - 1
+
+    def free_time(self) -> np.ndarray:
+        """(R,) float: each robot's completion time with zero delay."""
+        return self.tp_time[self.last_tp]
+
+
+class _Collector:
+    """Accumulates input violations and raises them together."""
+
+    def __init__(self) -> None:
+        self.errors: list[ErrorItem] = []
+
+    def add(self, loc: Loc, msg: str) -> None:
+        if len(self.errors) < MAX_REPORTED_ERRORS:
+            self.errors.append(ErrorItem(("body", *loc), msg))
+
+    def raise_if_any(self) -> None:
+        if self.errors:
+            raise ProblemError(self.errors)
+
+
+def problem_from_request(req: ScheduleRequest) -> Problem:
+    """Validate the cross-field rules of ``req`` and build its :class:`Problem`.
+
+    Raises:
+        ProblemError: listing every violated rule with the location at fault.
+    """
+    errs = _Collector()
+    node_index, node_robot, node_pos_loc = _index_nodes(req, errs)
+    errs.raise_if_any()
+    _check_node_times(req, errs)
+    conf_a, conf_b, pair_enter, pair_exit = _conflicts(req, node_index, node_robot, errs)
+    errs.raise_if_any()
+    limits = _density_limits(req, node_index, conf_a, conf_b, errs)
+    _check_goal_times(req, node_robot, conf_a, conf_b, pair_enter, pair_exit, errs)
+    errs.raise_if_any()
+    return _build(req, node_index, node_robot, conf_a, conf_b, pair_enter, pair_exit, limits)
+
+
+def _index_nodes(
+    req: ScheduleRequest, errs: _Collector
+) -> tuple[dict[str, int], np.ndarray, list[Loc]]:
+    """Give every node an index; report duplicate robot or node ids."""
+    robot_seen: dict[str, int] = {}
+    node_index: dict[str, int] = {}
+    node_robot: list[int] = []
+    locs: list[Loc] = []
+    for i, robot in enumerate(req.robots):
+        if robot.id in robot_seen:
+            errs.add(("robots", i, "id"), f"duplicate robot id '{robot.id}'")
+        robot_seen.setdefault(robot.id, i)
+        for j, node in enumerate(robot.nodes):
+            if node.id in node_index:
+                errs.add(("robots", i, "nodes", j, "id"), f"duplicate node id '{node.id}'")
+                continue
+            node_index[node.id] = len(node_robot)
+            node_robot.append(i)
+            locs.append(("robots", i, "nodes", j))
+    return node_index, np.asarray(node_robot, dtype=np.int64), locs
+
+
+def _check_node_times(req: ScheduleRequest, errs: _Collector) -> None:
+    """enter < exit on every node; a robot's nodes strictly separated in path order."""
+    for i, robot in enumerate(req.robots):
+        for j, node in enumerate(robot.nodes):
+            if not node.exit > node.enter:
+                errs.add(
+                    ("robots", i, "nodes", j, "exit"),
+                    f"node '{node.id}': exit ({node.exit}) must be greater than enter ({node.enter})",
+                )
+            if j > 0 and not node.enter > robot.nodes[j - 1].exit:
+                prev = robot.nodes[j - 1]
+                errs.add(
+                    ("robots", i, "nodes", j, "enter"),
+                    f"node '{node.id}' must enter ({node.enter}) after node '{prev.id}' exits "
+                    f"({prev.exit}): nodes are listed in path order and may not overlap or touch",
+                )
+
+
+def _conflicts(
+    req: ScheduleRequest, node_index: dict[str, int], node_robot: np.ndarray, errs: _Collector
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Resolve conflict endpoints and pair times; report every rule they break."""
+    nodes = {n.id: n for r in req.robots for n in r.nodes}
+    conf_a: list[int] = []
+    conf_b: list[int] = []
+    enters: list[tuple[float, float]] = []
+    exits: list[tuple[float, float]] = []
+    pairs: dict[frozenset[int], int] = {}
+    for k, c in enumerate(req.conflicts):
+        missing = [s for s in ("a", "b") if getattr(c, s) not in node_index]
+        for s in missing:
+            errs.add(("conflicts", k, s), f"unknown node id '{getattr(c, s)}'")
+        if missing:
+            continue
+        a, b = node_index[c.a], node_index[c.b]
+        if node_robot[a] == node_robot[b]:
+            errs.add(
+                ("conflicts", k),
+                f"conflict joins '{c.a}' and '{c.b}' of the same robot "
+                f"'{req.robots[node_robot[a]].id}'",
+            )
+            continue
+        key = frozenset((a, b))
+        if key in pairs:
+            errs.add(
+                ("conflicts", k),
+                f"duplicate conflict between '{c.a}' and '{c.b}' (also conflict {pairs[key]})",
+            )
+            continue
+        pairs[key] = k
+        side_times = []
+        for side, nid in (("a", c.a), ("b", c.b)):
+            node = nodes[nid]
+            enter = getattr(c, f"{side}_enter")
+            exit_ = getattr(c, f"{side}_exit")
+            enter = node.enter if enter is None else enter
+            exit_ = node.exit if exit_ is None else exit_
+            for name, value in ((f"{side}_enter", enter), (f"{side}_exit", exit_)):
+                if not node.enter <= value <= node.exit:
+                    errs.add(
+                        ("conflicts", k, name),
+                        f"{name} ({value}) must lie inside node '{nid}' "
+                        f"[{node.enter}, {node.exit}]",
+                    )
+            if not exit_ > enter:
+                errs.add(
+                    ("conflicts", k, f"{side}_exit"),
+                    f"{side}_exit ({exit_}) must be greater than {side}_enter ({enter})",
+                )
+            side_times.append((enter, exit_))
+        conf_a.append(a)
+        conf_b.append(b)
+        enters.append((side_times[0][0], side_times[1][0]))
+        exits.append((side_times[0][1], side_times[1][1]))
+    return (
+        np.asarray(conf_a, dtype=np.int64),
+        np.asarray(conf_b, dtype=np.int64),
+        np.asarray(enters, dtype=np.float64).reshape(-1, 2),
+        np.asarray(exits, dtype=np.float64).reshape(-1, 2),
+    )
+
+
+def _density_limits(
+    req: ScheduleRequest,
+    node_index: dict[str, int],
+    conf_a: np.ndarray,
+    conf_b: np.ndarray,
+    errs: _Collector,
+) -> tuple[DensityLimit, ...]:
+    """Resolve explicit density cliques; their nodes must be pairwise in conflict."""
+    edges = {frozenset(p) for p in zip(conf_a.tolist(), conf_b.tolist(), strict=True)}
+    limits: list[DensityLimit] = []
+    for k, lim in enumerate(req.density_limits):
+        unknown = [n for n in lim.nodes if n not in node_index]
+        for n in unknown:
+            errs.add(("density_limits", k, "nodes"), f"unknown node id '{n}'")
+        if len(set(lim.nodes)) != len(lim.nodes):
+            errs.add(("density_limits", k, "nodes"), "a node is listed twice")
+        if unknown or len(set(lim.nodes)) != len(lim.nodes):
+            continue
+        idx = [node_index[n] for n in lim.nodes]
+        missing = [
+            (lim.nodes[i], lim.nodes[j])
+            for i in range(len(idx))
+            for j in range(i + 1, len(idx))
+            if frozenset((idx[i], idx[j])) not in edges
+        ]
+        if missing:
+            u, v = missing[0]
+            errs.add(
+                ("density_limits", k, "nodes"),
+                f"nodes are not a clique of the conflict graph: no conflict between '{u}' and '{v}'",
+            )
+            continue
+        limits.append(DensityLimit(np.asarray(sorted(idx), dtype=np.int64), lim.max_robots))
+    return tuple(limits)
+
+
+def _check_goal_times(
+    req: ScheduleRequest,
+    node_robot: np.ndarray,
+    conf_a: np.ndarray,
+    conf_b: np.ndarray,
+    pair_enter: np.ndarray,
+    pair_exit: np.ndarray,
+    errs: _Collector,
+) -> None:
+    """A goal time may not precede any other time point of its robot."""
+    latest = np.array([r.nodes[-1].exit for r in req.robots], dtype=np.float64)
+    for side, nodes in ((0, conf_a), (1, conf_b)):
+        if nodes.size:
+            np.maximum.at(latest, node_robot[nodes], pair_exit[:, side])
+    for i, robot in enumerate(req.robots):
+        if robot.goal_time is not None and robot.goal_time < latest[i]:
+            errs.add(
+                ("robots", i, "goal_time"),
+                f"goal_time ({robot.goal_time}) of robot '{robot.id}' precedes its last "
+                f"time point ({latest[i]})",
+            )
+
+
+def _build(
+    req: ScheduleRequest,
+    node_index: dict[str, int],
+    node_robot: np.ndarray,
+    conf_a: np.ndarray,
+    conf_b: np.ndarray,
+    pair_enter: np.ndarray,
+    pair_exit: np.ndarray,
+    limits: tuple[DensityLimit, ...],
+) -> Problem:
+    """Assemble the arrays, including each robot's sorted distinct time points."""
+    nodes = [n for r in req.robots for n in r.nodes]
+    n_robots = len(req.robots)
+    node_enter = np.array([n.enter for n in nodes], dtype=np.float64)
+    node_exit = np.array([n.exit for n in nodes], dtype=np.float64)
+    goal = np.array(
+        [np.nan if r.goal_time is None else r.goal_time for r in req.robots], dtype=np.float64
+    )
+    conf_nodes = np.stack([conf_a, conf_b], axis=1)  # (M, 2)
+    conf_robot = node_robot[conf_nodes]  # (M, 2)
+    # Candidate time points with their robot; unique per robot via a (robot, time) sort.
+    cand_robot = np.concatenate(
+        [node_robot, node_robot, conf_robot.ravel(), conf_robot.ravel(), np.arange(n_robots)]
+    )
+    cand_time = np.concatenate(
+        [node_enter, node_exit, pair_enter.ravel(), pair_exit.ravel(), goal]
+    )
+    keep = ~np.isnan(cand_time)
+    # Exact (robot, time) keys: times replaced by their rank among all distinct times.
+    distinct = np.unique(cand_time[keep])
+    width = distinct.size
+
+    def key(robots: np.ndarray, times: np.ndarray) -> np.ndarray:
+        return robots.astype(np.int64) * width + np.searchsorted(distinct, times)
+
+    tp_key = np.unique(key(cand_robot[keep], cand_time[keep]))
+    tp_robot = tp_key // width
+    tp_time = distinct[tp_key % width]
+    tp_start = np.searchsorted(tp_robot, np.arange(n_robots + 1), side="left")
+
+    def locate(robots: np.ndarray, times: np.ndarray) -> np.ndarray:
+        return np.searchsorted(tp_key, key(robots, times))
+
+    counts = np.array([len(r.nodes) for r in req.robots], dtype=np.int64)
+    return Problem(
+        robot_ids=tuple(r.id for r in req.robots),
+        node_ids=tuple(n.id for n in nodes),
+        robot_start=np.concatenate([[0], np.cumsum(counts)]),
+        node_robot=node_robot,
+        node_enter=node_enter,
+        node_exit=node_exit,
+        node_density=np.array([n.density for n in nodes], dtype=np.int64),
+        goal_time=goal,
+        conf_a=conf_a,
+        conf_b=conf_b,
+        pair_enter=pair_enter,
+        pair_exit=pair_exit,
+        density_limits=limits,
+        tp_time=tp_time,
+        tp_start=tp_start,
+        tp_pair_enter=locate(conf_robot, pair_enter).reshape(-1, 2),
+        tp_pair_exit=locate(conf_robot, pair_exit).reshape(-1, 2),
+        tp_node_enter=locate(node_robot, node_enter),
+        tp_node_exit=locate(node_robot, node_exit),
+        node_index=node_index,
+    )

@@ -1,0 +1,179 @@
+"""Wire models of the v1 schedule contract (request and response).
+
+These pydantic models check everything that can be checked field by field
+(types, ranges, unknown fields); rules that span several fields (ids, node
+order, pair times inside their node, cliques) are checked when the request is
+turned into a :class:`service.core.problem.Problem`.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+__all__ = [
+    "MAX_TIME",
+    "OBJECTIVES",
+    "SOLVER_NAMES",
+    "Objective",
+    "SolverName",
+    "NodeIn",
+    "RobotIn",
+    "ConflictIn",
+    "DensityLimitIn",
+    "OptionsIn",
+    "ScheduleRequest",
+    "AssignmentOut",
+    "NodeTimesOut",
+    "RobotScheduleOut",
+    "SolverInfoOut",
+    "ChecksOut",
+    "CostsOut",
+    "ScheduleResponse",
+]
+
+# Times above this are rejected: ~31.7 years in seconds. It keeps integer-scaled
+# times of the exact solver far from int64 overflow while allowing any real time scale.
+MAX_TIME = 1e9
+
+Objective = Literal["avg_completion", "max_completion", "sync_completion", "avg_delay"]
+OBJECTIVES: tuple[Objective, ...] = (
+    "avg_completion",
+    "max_completion",
+    "sync_completion",
+    "avg_delay",
+)
+SolverName = Literal["auto", "exact", "fcfs"]
+SOLVER_NAMES: tuple[SolverName, ...] = ("auto", "exact", "fcfs")
+
+Time = Annotated[float, Field(strict=True, ge=0.0, le=MAX_TIME, allow_inf_nan=False)]
+Count = Annotated[int, Field(strict=True, ge=1)]
+Id = Annotated[str, Field(min_length=1, max_length=200)]
+
+
+class _Strict(BaseModel):
+    """Base of request models: unknown fields are errors, not silently ignored."""
+
+    model_config = ConfigDict(extra="forbid")
+
+
+class NodeIn(_Strict):
+    """One merged interfering interval of a robot's path."""
+
+    id: Id
+    enter: Time
+    exit: Time
+    density: Count = 1
+
+
+class RobotIn(_Strict):
+    """A robot with its nodes in path order and an optional goal time."""
+
+    id: Id
+    nodes: list[NodeIn] = Field(min_length=1)
+    goal_time: Time | None = None
+
+
+class ConflictIn(_Strict):
+    """An interfering pair of nodes of two robots, with the pair's own section times."""
+
+    a: Id
+    b: Id
+    a_enter: Time | None = None
+    a_exit: Time | None = None
+    b_enter: Time | None = None
+    b_exit: Time | None = None
+
+
+class DensityLimitIn(_Strict):
+    """An explicit clique of nodes in which at most ``max_robots`` robots may crowd."""
+
+    nodes: list[Id] = Field(min_length=2)
+    max_robots: Count
+
+
+class OptionsIn(_Strict):
+    """How to solve: which solver, how long, which seed, how many samples."""
+
+    solver: SolverName = "auto"
+    time_limit_s: float | None = Field(default=None, gt=0.0, le=300.0, strict=True)
+    seed: int = Field(default=0, ge=0, le=2**31 - 1, strict=True)
+    samples: int | None = Field(default=None, ge=1, le=1000, strict=True)
+
+
+class ScheduleRequest(_Strict):
+    """Body of ``POST /v1/schedules``: a coordination skeleton graph to schedule."""
+
+    objective: Objective = "avg_completion"
+    robots: list[RobotIn] = Field(min_length=1)
+    conflicts: list[ConflictIn] = Field(default_factory=list)
+    density_limits: list[DensityLimitIn] = Field(default_factory=list)
+    options: OptionsIn = Field(default_factory=OptionsIn)
+
+
+class AssignmentOut(BaseModel):
+    """The decision for one conflict: who passes first, and how."""
+
+    model_config = ConfigDict(populate_by_name=True)
+
+    from_: str = Field(alias="from")
+    to: str
+    type: Literal["exclusive", "following"]
+
+
+class NodeTimesOut(BaseModel):
+    """A node's updated (least) enter and exit times."""
+
+    id: str
+    enter: float
+    exit: float
+
+
+class RobotScheduleOut(BaseModel):
+    """One robot's updated completion time, final delay and node times."""
+
+    robot: str
+    completion: float
+    delay: float
+    nodes: list[NodeTimesOut]
+
+
+class SolverInfoOut(BaseModel):
+    """Which solver answered, whether it proved optimality, and how long it took."""
+
+    name: str
+    optimal: bool
+    runtime_s: float
+    model: str | None = None
+    samples: int | None = None
+    fallback_from: str | None = None
+    detail: str | None = None
+
+
+class ChecksOut(BaseModel):
+    """Results of the independent constraint checker on the returned assignment."""
+
+    acyclic: bool
+    density: bool
+
+
+class CostsOut(BaseModel):
+    """All four objectives evaluated on the returned assignment."""
+
+    avg_completion: float
+    max_completion: float
+    sync_completion: float
+    avg_delay: float
+
+
+class ScheduleResponse(BaseModel):
+    """Body of a successful ``POST /v1/schedules``."""
+
+    objective: Objective
+    cost: float
+    costs: CostsOut
+    assignment: list[AssignmentOut]
+    schedule: list[RobotScheduleOut]
+    solver: SolverInfoOut
+    checks: ChecksOut
