@@ -127,30 +127,15 @@ class Evaluator:
     def __init__(self, problem: Problem) -> None:
         self.problem = problem
         tp_robot = problem.tp_robot
-        # Events: distinct pair-enter time points, already sorted by (robot, time).
-        events = np.unique(problem.tp_pair_enter.ravel())  # (E,)
-        self.n_events = events.size
-        ev_robot = tp_robot[events]
-        same_next = np.zeros(events.size, dtype=bool)
-        same_next[:-1] = ev_robot[1:] == ev_robot[:-1]
-        self._chain_next = np.where(same_next, np.arange(1, events.size + 1), -1)  # (E,)
-        self._tp_event = self._event_of_time_points(problem, events)  # (P,)
+        self.n_events = problem.events.size
+        self._chain_next = problem.event_next  # (E,)
+        self._tp_event = problem.tp_event  # (P,)
         self._build_slots(problem)
         counts = np.diff(problem.tp_start).astype(np.float64)  # (R,) time points per robot
         weights = np.zeros(self.n_events + 1)
         np.add.at(weights, self._tp_event, 1.0 / (counts[tp_robot] * problem.n_robots))
         self._delay_weight = weights  # (E+1,): avg_delay = event_delay @ weights
         self._last_event = self._tp_event[problem.last_tp]  # (R,)
-
-    def _event_of_time_points(self, problem: Problem, events: np.ndarray) -> np.ndarray:
-        """(P,) the last event at or before each time point of its robot (E if none)."""
-        tp_robot = problem.tp_robot
-        if events.size == 0:
-            return np.full(tp_robot.size, 0, dtype=np.int64)
-        pos = np.searchsorted(events, np.arange(tp_robot.size), side="right") - 1  # (P,)
-        last = np.maximum(pos, 0)
-        same_robot = (pos >= 0) & (tp_robot[events[last]] == tp_robot)
-        return np.where(same_robot, last, events.size).astype(np.int64)
 
     def _build_slots(self, problem: Problem) -> None:
         """Fixed arrays of the 2M conflict constraints.

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -112,6 +113,34 @@ class Problem:
     def last_tp(self) -> np.ndarray:
         """(R,) int: each robot's last (completion) time point."""
         return self.tp_start[1:] - 1
+
+    @cached_property
+    def events(self) -> np.ndarray:
+        """(E,) int: distinct pair-enter time points, sorted by (robot, time).
+
+        Delays only rise at events (the only targets of conflict constraints), so
+        the evaluator and the exact solver keep one delay per event.
+        """
+        return np.unique(self.tp_pair_enter.ravel())
+
+    @cached_property
+    def tp_event(self) -> np.ndarray:
+        """(P,) int: the last event at or before each time point of its robot (E if none)."""
+        events, tp_robot = self.events, self.tp_robot
+        if events.size == 0:
+            return np.zeros(tp_robot.size, dtype=np.int64)
+        pos = np.searchsorted(events, np.arange(tp_robot.size), side="right") - 1  # (P,)
+        last = np.maximum(pos, 0)
+        same_robot = (pos >= 0) & (tp_robot[events[last]] == tp_robot)
+        return np.where(same_robot, last, events.size).astype(np.int64)
+
+    @cached_property
+    def event_next(self) -> np.ndarray:
+        """(E,) int: the next event of the same robot, or -1."""
+        ev_robot = self.tp_robot[self.events]
+        same_next = np.zeros(ev_robot.size, dtype=bool)
+        same_next[:-1] = ev_robot[1:] == ev_robot[:-1]
+        return np.where(same_next, np.arange(1, ev_robot.size + 1), -1)
 
     def free_time(self) -> np.ndarray:
         """(R,) float: each robot's completion time with zero delay."""

@@ -1,0 +1,86 @@
+"""The solver registry: every solver answers the same call on the same context.
+
+A solver receives a :class:`SolveContext` (the validated problem with its
+cliques, evaluator and decoder, built once per request) and returns a
+:class:`SolverOutput` holding one assignment, or ``None`` when it found no
+solution within its time limit. It never renders HTTP and never checks its own
+answer: :mod:`service.solvers.dispatch` does that, once, for every solver.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from functools import cached_property
+
+from service.core.assignment import Assignments
+from service.core.cliques import Cliques, find_cliques
+from service.core.decode import Decoder
+from service.core.evaluate import Evaluator
+from service.core.problem import Problem
+from service.core.schemas import Objective
+
+__all__ = ["SolveContext", "Solver", "SolverOutput", "get_solver", "register", "solver_names"]
+
+
+@dataclass(eq=False)
+class SolveContext:
+    """Everything a solver needs about one request; derived structures built lazily, once."""
+
+    problem: Problem
+    objective: Objective
+    time_limit_s: float
+    seed: int = 0
+    samples: int | None = None
+    workers: int = 1
+
+    @cached_property
+    def cliques(self) -> Cliques:
+        return find_cliques(self.problem)
+
+    @cached_property
+    def evaluator(self) -> Evaluator:
+        return Evaluator(self.problem)
+
+    @cached_property
+    def decoder(self) -> Decoder:
+        return Decoder(self.problem, self.cliques)
+
+
+@dataclass
+class SolverOutput:
+    """A solver's answer: one assignment and what the solver knows about it."""
+
+    assignment: Assignments  # a batch of one
+    optimal: bool = False
+    model: str | None = None
+    samples: int | None = None
+    detail: str | None = None
+    extra: dict[str, float] = field(default_factory=dict)
+
+
+Solver = Callable[[SolveContext], SolverOutput | None]
+
+_REGISTRY: dict[str, Solver] = {}
+
+
+def register(name: str) -> Callable[[Solver], Solver]:
+    """Decorator adding a solver under ``name`` (the value of ``options.solver``)."""
+
+    def add(fn: Solver) -> Solver:
+        if name in _REGISTRY:
+            raise ValueError(f"solver {name!r} registered twice")
+        _REGISTRY[name] = fn
+        return fn
+
+    return add
+
+
+def get_solver(name: str) -> Solver:
+    """The solver registered under ``name`` (KeyError if none)."""
+    return _REGISTRY[name]
+
+
+def solver_names() -> tuple[str, ...]:
+    """Names of every registered solver."""
+    return tuple(_REGISTRY)
