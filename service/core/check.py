@@ -50,7 +50,10 @@ def is_acyclic(problem: Problem, first: np.ndarray, second: np.ndarray) -> bool:
 def check(problem: Problem, cliques: Cliques, assignments: Assignments) -> CheckResult:
     """Check node-level acyclicity and every clique's following budget."""
     acyclic = np.array(
-        [is_acyclic(problem, *assignments.from_to(problem, s)) for s in range(assignments.n_samples)],
+        [
+            is_acyclic(problem, *assignments.from_to(problem, s))
+            for s in range(assignments.n_samples)
+        ],
         dtype=bool,
     )
     counts = cliques.following_counts(assignments.following)  # (S, Q)

@@ -71,7 +71,9 @@ def find_cliques(problem: Problem) -> Cliques:
     """Maximal cliques of the conflict graph plus explicit limits, with budgets."""
     pair_index = {
         (a, b): k
-        for k, (a, b) in enumerate(zip(problem.conf_a.tolist(), problem.conf_b.tolist(), strict=True))
+        for k, (a, b) in enumerate(
+            zip(problem.conf_a.tolist(), problem.conf_b.tolist(), strict=True)
+        )
     }
     pair_index.update({(b, a): k for (a, b), k in list(pair_index.items())})
     graph = nx.Graph()

@@ -209,7 +209,8 @@ def _check_node_times(req: ScheduleRequest, errs: _Collector) -> None:
             if not node.exit > node.enter:
                 errs.add(
                     ("robots", i, "nodes", j, "exit"),
-                    f"node '{node.id}': exit ({node.exit}) must be greater than enter ({node.enter})",
+                    f"node '{node.id}': exit ({node.exit}) must be greater than "
+                    f"enter ({node.enter})",
                 )
             if j > 0 and not node.enter > robot.nodes[j - 1].exit:
                 prev = robot.nodes[j - 1]
@@ -313,7 +314,8 @@ def _density_limits(
             u, v = missing[0]
             errs.add(
                 ("density_limits", k, "nodes"),
-                f"nodes are not a clique of the conflict graph: no conflict between '{u}' and '{v}'",
+                "nodes are not a clique of the conflict graph: "
+                f"no conflict between '{u}' and '{v}'",
             )
             continue
         limits.append(DensityLimit(np.asarray(sorted(idx), dtype=np.int64), lim.max_robots))
@@ -367,9 +369,7 @@ def _build(
     cand_robot = np.concatenate(
         [node_robot, node_robot, conf_robot.ravel(), conf_robot.ravel(), np.arange(n_robots)]
     )
-    cand_time = np.concatenate(
-        [node_enter, node_exit, pair_enter.ravel(), pair_exit.ravel(), goal]
-    )
+    cand_time = np.concatenate([node_enter, node_exit, pair_enter.ravel(), pair_exit.ravel(), goal])
     keep = ~np.isnan(cand_time)
     # Exact (robot, time) keys: times replaced by their rank among all distinct times.
     distinct = np.unique(cand_time[keep])

@@ -68,7 +68,9 @@ def solve_problem(cfg: DatasetConfig, index: int) -> dict[str, Any]:
     evaluator = Evaluator(problem)
     targets: dict[str, list[dict[str, Any]]] = {}
     for objective in cfg.objectives:
-        found = top_assignments(problem, cliques, objective, cfg.top, cfg.solve_time_limit_s, seed=0)
+        found = top_assignments(
+            problem, cliques, objective, cfg.top, cfg.solve_time_limit_s, seed=0
+        )
         targets[objective] = [
             {
                 "a_first": _bits(r.assignment.a_first[0]),
@@ -111,8 +113,11 @@ def build_dataset(cfg: DatasetConfig, out: Path, workers: int = 2) -> dict[str, 
             raise SystemExit(f"{out} holds a dataset with other settings; choose another --out")
     n_shards = -(-cfg.problems // cfg.shard_size)
     todo = [s for s in range(n_shards) if not (out / f"shard-{s:05d}.jsonl").exists()]
-    manifest_path.write_text(json.dumps({"format": DATASET_FORMAT, "config": _config_dict(cfg),
-                                         "complete": False}, indent=1))
+    manifest_path.write_text(
+        json.dumps(
+            {"format": DATASET_FORMAT, "config": _config_dict(cfg), "complete": False}, indent=1
+        )
+    )
     with ProcessPoolExecutor(max_workers=workers) as pool:
         jobs = pool.map(_solve_shard, [(cfg, s, str(out)) for s in todo])
         for _ in tqdm(jobs, total=len(todo), desc="shards", unit="shard"):
@@ -157,8 +162,12 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--top", type=int, default=DatasetConfig.top)
     parser.add_argument("--shard-size", type=int, default=DatasetConfig.shard_size)
     parser.add_argument("--workers", type=int, default=2)
-    parser.add_argument("--time-scale", type=float, default=1.0,
-                        help="multiply every generated time (tests time-scale invariance)")
+    parser.add_argument(
+        "--time-scale",
+        type=float,
+        default=1.0,
+        help="multiply every generated time (tests time-scale invariance)",
+    )
     args = parser.parse_args(argv)
     cfg = DatasetConfig(
         problems=args.problems,

@@ -92,17 +92,25 @@ def _add_conflicts(
     picks = rng.choice(weight.size, size=count, replace=False, p=weight / weight.sum())
     for flat in np.sort(picks):
         i, j = divmod(int(flat), len(nodes))
-        (a_enter, a_exit), (b_enter, b_exit) = _pair_section(rng, nodes[i][1]), _pair_section(
-            rng, nodes[j][1]
+        (a_enter, a_exit), (b_enter, b_exit) = (
+            _pair_section(rng, nodes[i][1]),
+            _pair_section(rng, nodes[j][1]),
         )
         request["conflicts"].append(
-            {"a": nodes[i][1]["id"], "b": nodes[j][1]["id"], "a_enter": a_enter,
-             "a_exit": a_exit, "b_enter": b_enter, "b_exit": b_exit}
+            {
+                "a": nodes[i][1]["id"],
+                "b": nodes[j][1]["id"],
+                "a_enter": a_enter,
+                "a_exit": a_exit,
+                "b_enter": b_enter,
+                "b_exit": b_exit,
+            }
         )
 
 
 def _round_times(request: Request, scale: float) -> Request:
     """Scale every time and round to 1 ms of the unscaled clock (keeps order strict)."""
+
     def fix(x: float) -> float:
         return round(x, 3) * scale
 
@@ -131,13 +139,16 @@ def _clamp_pair_times(request: Request) -> None:
             c[f"{side}_enter"], c[f"{side}_exit"] = enter, exit_
 
 
-def _robots(rng: np.random.Generator, cfg: GeneratorConfig, n_robots: int, tag: str, t0: float) -> list[dict]:
+def _robots(
+    rng: np.random.Generator, cfg: GeneratorConfig, n_robots: int, tag: str, t0: float
+) -> list[dict]:
     """``n_robots`` random robots with ids prefixed by ``tag``."""
     robots = []
     for i in range(n_robots):
         rid = f"{tag}r{i}"
-        nodes = _robot_nodes(rng, rid, int(rng.integers(1, cfg.max_nodes_per_robot + 1)),
-                             t0 + rng.uniform(0.0, 5.0))
+        nodes = _robot_nodes(
+            rng, rid, int(rng.integers(1, cfg.max_nodes_per_robot + 1)), t0 + rng.uniform(0.0, 5.0)
+        )
         robot: dict[str, Any] = {"id": rid, "nodes": nodes}
         if rng.random() < 0.7:
             robot["goal_time"] = nodes[-1]["exit"] + rng.uniform(0.5, 3.0)
@@ -145,7 +156,9 @@ def _robots(rng: np.random.Generator, cfg: GeneratorConfig, n_robots: int, tag: 
     return robots
 
 
-def _part(rng: np.random.Generator, cfg: GeneratorConfig, n_robots: int, tag: str, t0: float) -> Request:
+def _part(
+    rng: np.random.Generator, cfg: GeneratorConfig, n_robots: int, tag: str, t0: float
+) -> Request:
     """Robots and their own conflicts: one small problem, ids prefixed by ``tag``."""
     request: Request = {"robots": _robots(rng, cfg, n_robots, tag, t0), "conflicts": []}
     _add_conflicts(rng, request, int(rng.integers(1, cfg.max_conflicts + 1)), cfg.closeness)
@@ -183,7 +196,9 @@ def stitched_problem(
     part_of_node: list[int] = []
     horizon = 2.0 * np.sqrt(n_robots)
     while len(request["robots"]) < n_robots:
-        size = min(int(rng.integers(cfg.min_robots, cfg.max_robots + 1)), n_robots - len(request["robots"]))
+        size = min(
+            int(rng.integers(cfg.min_robots, cfg.max_robots + 1)), n_robots - len(request["robots"])
+        )
         part = _part(rng, cfg, size, f"p{len(set(part_of_node))}", rng.uniform(0.0, horizon))
         part_of_node += [len(set(part_of_node))] * sum(len(r["nodes"]) for r in part["robots"])
         request["robots"] += part["robots"]

@@ -11,9 +11,11 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
-from service.core.check import check
+from service.core.check import CheckResult, check
 from service.core.problem import problem_from_request
 from service.core.schemas import (
     AssignmentOut,
@@ -25,14 +27,21 @@ from service.core.schemas import (
     ScheduleResponse,
     SolverInfoOut,
 )
-from service.solvers import exact, fcfs  # noqa: F401  (registers the solvers)
+from service.solvers import exact, fcfs, gnn_vae  # noqa: F401  (registers the solvers)
 from service.solvers.registry import SolveContext, SolverOutput, get_solver
+
+if TYPE_CHECKING:
+    from service.learning.store import StoredModel
 
 __all__ = ["DispatchPolicy", "InvalidAnswerError", "dispatch"]
 
 log = logging.getLogger(__name__)
 
-FALLBACK_SOLVER = "fcfs"
+# What answers when a solver has no answer (no solution in time, no model loaded):
+# the learned model degrades to the exact solver with the request's time limit,
+# and everything ends at FCFS, which is instant and valid by construction.
+FALLBACKS: dict[str, tuple[str, ...]] = {"gnn_vae": ("exact", "fcfs")}
+LAST_RESORT = "fcfs"
 
 
 class InvalidAnswerError(RuntimeError):
@@ -47,6 +56,7 @@ class DispatchPolicy:
     exact_max_robots: int = 30
     large_solver: str = "exact"
     exact_workers: int = 1
+    models: Mapping[str, StoredModel] = field(default_factory=dict)  # loaded GNN-VAEs by objective
 
 
 def choose_solver(request: ScheduleRequest, n_robots: int, policy: DispatchPolicy) -> str:
@@ -72,19 +82,11 @@ def dispatch(request: ScheduleRequest, policy: DispatchPolicy) -> ScheduleRespon
         seed=opts.seed,
         samples=opts.samples,
         workers=policy.exact_workers,
+        models=policy.models,
     )
     name = choose_solver(request, problem.n_robots, policy)
     start = time.perf_counter()
-    output = get_solver(name)(ctx)
-    used, fallback_from = name, None
-    if output is None or not check(problem, ctx.cliques, output.assignment).ok[0]:
-        if output is not None:
-            log.error("solver %s returned an invalid assignment; falling back to fcfs", name)
-        used, fallback_from = FALLBACK_SOLVER, name
-        output = get_solver(FALLBACK_SOLVER)(ctx)
-    checks = check(problem, ctx.cliques, output.assignment)
-    if not checks.ok[0]:
-        raise InvalidAnswerError(f"fallback {FALLBACK_SOLVER} answer failed the checker")
+    used, output, checks = _first_valid_answer(ctx, name)
     runtime = time.perf_counter() - start
     info = SolverInfoOut(
         name=used,
@@ -92,11 +94,31 @@ def dispatch(request: ScheduleRequest, policy: DispatchPolicy) -> ScheduleRespon
         runtime_s=runtime,
         model=output.model,
         samples=output.samples,
-        fallback_from=fallback_from,
-        detail=output.detail,
+        fallback_from=None if used == name else name,
+        detail=output.detail
+        if used == name
+        else f"{name} gave no answer (no solution in time, or no model loaded)",
     )
     checked = ChecksOut(acyclic=bool(checks.acyclic[0]), density=bool(checks.density[0]))
     return _render(request, ctx, output, info, checked)
+
+
+def _first_valid_answer(ctx: SolveContext, name: str) -> tuple[str, SolverOutput, CheckResult]:
+    """Run ``name``, then its fallbacks, until one answer passes the checker.
+
+    Raises:
+        InvalidAnswerError: not even the last resort gave a valid answer (a bug).
+    """
+    chain = dict.fromkeys((name, *FALLBACKS.get(name, ()), LAST_RESORT))
+    for candidate in chain:
+        output = get_solver(candidate)(ctx)
+        if output is None:
+            continue
+        checks = check(ctx.problem, ctx.cliques, output.assignment)
+        if checks.ok[0]:
+            return candidate, output, checks
+        log.error("solver %s returned an invalid assignment; trying its fallback", candidate)
+    raise InvalidAnswerError(f"no solver in {list(chain)} gave a valid answer")
 
 
 def _render(
@@ -127,7 +149,10 @@ def _render(
                 robot=rid,
                 completion=float(result.completion[0, r]),
                 delay=float(final_delay[r]),
-                nodes=[NodeTimesOut(id=ids[v], enter=float(enter[v]), exit=float(exit_[v])) for v in nodes],
+                nodes=[
+                    NodeTimesOut(id=ids[v], enter=float(enter[v]), exit=float(exit_[v]))
+                    for v in nodes
+                ],
             )
         )
     costs = {k: float(v[0]) for k, v in result.costs.items()}
@@ -140,4 +165,3 @@ def _render(
         solver=info,
         checks=checks,
     )
-

@@ -71,7 +71,10 @@ class ExactModel:
         """No-good: forbid exactly the first assignment of the batch."""
         clause = [
             lit.Not() if val else lit
-            for lits, vals in ((self.a_first, assignments.a_first[0]), (self.following, assignments.following[0]))
+            for lits, vals in (
+                (self.a_first, assignments.a_first[0]),
+                (self.following, assignments.following[0]),
+            )
             for lit, val in zip(lits, vals.tolist(), strict=True)
         ]
         self.model.add_bool_or(clause)
@@ -93,7 +96,7 @@ def time_scale(problem: Problem) -> float:
     times = problem.tp_time
     top = max(float(times.max()), 1e-9)
     cap = 10.0 ** math.floor(TIME_DIGITS - math.log10(top))
-    scale = 10.0 ** -3
+    scale = 10.0**-3
     while scale < cap:
         scaled = times * scale
         if np.all(np.abs(scaled - np.rint(scaled)) <= 1e-9 * np.maximum(1.0, scaled)):

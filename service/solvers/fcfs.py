@@ -9,8 +9,6 @@ through the shared decoder, so density limits hold by construction.
 
 from __future__ import annotations
 
-import numpy as np
-
 from service.solvers.registry import SolveContext, SolverOutput, register
 
 __all__ = ["fcfs"]

@@ -9,9 +9,10 @@ answer: :mod:`service.solvers.dispatch` does that, once, for every solver.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 from service.core.assignment import Assignments
 from service.core.cliques import Cliques, find_cliques
@@ -19,6 +20,9 @@ from service.core.decode import Decoder
 from service.core.evaluate import Evaluator
 from service.core.problem import Problem
 from service.core.schemas import Objective
+
+if TYPE_CHECKING:  # the learned models need torch; the registry itself does not
+    from service.learning.store import StoredModel
 
 __all__ = ["SolveContext", "Solver", "SolverOutput", "get_solver", "register", "solver_names"]
 
@@ -33,6 +37,7 @@ class SolveContext:
     seed: int = 0
     samples: int | None = None
     workers: int = 1
+    models: Mapping[str, StoredModel] = field(default_factory=dict)  # by objective
 
     @cached_property
     def cliques(self) -> Cliques:
