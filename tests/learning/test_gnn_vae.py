@@ -1,0 +1,137 @@
+"""GNN-VAE: store round trip, training lowers the loss, decoded samples are valid, determinism."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from torch_geometric.data import Batch
+
+from service.core.check import check
+from service.core.cliques import find_cliques
+from service.core.evaluate import Evaluator
+from service.core.problem import problem_from_request
+from service.core.schemas import OBJECTIVES, ScheduleRequest
+from service.learning.data import DatasetConfig, solve_problem
+from service.learning.dataset import examples_from_records, to_data
+from service.learning.features import graph_tensors
+from service.learning.infer import best_of, decode_candidates, propose
+from service.learning.model import GnnVae, GnnVaeConfig
+from service.learning.store import ModelLoadError, load_all, load_model, save_model
+from service.learning.train import WEIGHTS, loss_terms
+from service.learning.generate import GeneratorConfig, small_problem, stitched_problem
+
+TINY = GnnVaeConfig(hidden=16, latent=4, encoder_layers=1, decoder_layers=2, heads=1)
+SHIPPED = Path(__file__).resolve().parents[2] / "model_store"
+
+
+def _problem(request: dict):
+    problem = problem_from_request(ScheduleRequest.model_validate(request))
+    return problem, find_cliques(problem)
+
+
+@pytest.fixture(scope="module")
+def records() -> list[dict]:
+    cfg = DatasetConfig(problems=12, top=3, generator=GeneratorConfig(max_robots=4))
+    return [solve_problem(cfg, i) for i in range(cfg.problems)]
+
+
+def test_store_round_trip_and_corruption(tmp_path: Path) -> None:
+    torch.manual_seed(0)
+    model = GnnVae(TINY)
+    save_model(model, tmp_path, "avg_completion", "t1", {"validation": {"ratio": 0.5}})
+    loaded = load_model(tmp_path, "avg_completion")
+    assert loaded.version == "t1" and loaded.name == "gnn_vae/avg_completion/t1"
+    for key, value in model.state_dict().items():
+        assert torch.equal(value, loaded.model.state_dict()[key])
+    weights = tmp_path / "avg_completion" / "t1" / "model.safetensors"
+    weights.write_bytes(weights.read_bytes()[:-8] + b"corrupt!")
+    with pytest.raises(ModelLoadError, match="checksum"):
+        load_model(tmp_path, "avg_completion")
+    models, errors = load_all(tmp_path, ("avg_completion", "max_completion"))
+    assert models == {} and set(errors) == {"avg_completion", "max_completion"}
+
+
+def test_config_mismatch_is_a_load_error(tmp_path: Path) -> None:
+    save_model(GnnVae(TINY), tmp_path, "avg_delay", "t1", {})
+    meta_path = tmp_path / "avg_delay" / "t1" / "model.json"
+    meta = json.loads(meta_path.read_text())
+    meta["config"]["hidden"] = 32
+    meta_path.write_text(json.dumps(meta))
+    with pytest.raises(ModelLoadError):
+        load_model(tmp_path, "avg_delay")
+
+
+def test_training_steps_lower_the_loss(records: list[dict]) -> None:
+    torch.manual_seed(0)
+    examples = examples_from_records(records, "avg_completion")
+    batch = Batch.from_data_list([to_data(ex, 0) for ex in examples])
+    model = GnnVae(TINY)
+    opt = torch.optim.Adam(model.parameters(), lr=3e-3)
+
+    def total() -> torch.Tensor:
+        torch.manual_seed(1)  # same reparametrization noise each time
+        return sum(WEIGHTS[k] * v for k, v in loss_terms(model, batch).items())
+
+    before = total().item()
+    for _ in range(40):
+        opt.zero_grad()
+        total().backward()
+        opt.step()
+    assert total().item() < 0.8 * before
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 10_000), z_seed=st.integers(0, 2**31 - 1), big=st.booleans())
+def test_decoded_samples_are_always_valid(seed: int, z_seed: int, big: bool) -> None:
+    request = stitched_problem(seed, 30, 3.0) if big else small_problem(seed)
+    problem, cliques = _problem(request)
+    torch.manual_seed(seed)
+    model = GnnVae(TINY).eval()
+    bids, probs = propose(model, graph_tensors(problem, cliques), samples=8, seed=z_seed)
+    assert bids.shape == (8, problem.n_nodes) and probs.shape == (8, problem.n_conflicts)
+    from service.core.decode import Decoder
+
+    for objective in OBJECTIVES:
+        candidates = decode_candidates(Decoder(problem, cliques), bids, probs, objective)
+        assert check(problem, cliques, candidates).ok.all()
+
+
+def test_inference_is_deterministic_for_a_seed() -> None:
+    problem, cliques = _problem(small_problem(7))
+    model = GnnVae(TINY).eval()
+    graph = graph_tensors(problem, cliques)
+    first = propose(model, graph, 16, seed=3)
+    again = propose(model, graph, 16, seed=3)
+    other = propose(model, graph, 16, seed=4)
+    assert np.array_equal(first[0], again[0]) and np.array_equal(first[1], again[1])
+    assert not np.array_equal(first[0], other[0])
+
+
+def test_features_do_not_depend_on_time_scale() -> None:
+    a, ca = _problem(small_problem(11))
+    b, cb = _problem(small_problem(11, cfg=GeneratorConfig(time_scale=3600.0)))
+    ga, gb = graph_tensors(a, ca), graph_tensors(b, cb)
+    assert torch.allclose(ga.x, gb.x, atol=1e-5)
+    assert torch.allclose(ga.edge_attr, gb.edge_attr, atol=1e-5)
+
+
+@pytest.mark.parametrize("objective", OBJECTIVES)
+def test_shipped_models_load_and_answer(objective: str) -> None:
+    manifest = json.loads((SHIPPED / "manifest.json").read_text())
+    assert objective in manifest["default"]
+    stored = load_model(SHIPPED, objective)
+    problem, cliques = _problem(small_problem(5))
+    from service.core.decode import Decoder
+
+    assignment, cost = best_of(
+        stored.model, graph_tensors(problem, cliques), Decoder(problem, cliques),
+        Evaluator(problem), objective, samples=10, seed=0,
+    )
+    assert check(problem, cliques, assignment).ok.all()
+    assert np.isfinite(cost)
