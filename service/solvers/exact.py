@@ -28,6 +28,7 @@ but which of several optimal assignments is returned may vary.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -261,12 +262,26 @@ def _params(time_limit_s: float, seed: int, workers: int) -> cp_model.CpSolver:
     return solver
 
 
-def _read(solver: cp_model.CpSolver, em: ExactModel) -> Assignments:
-    """The assignment of the solver's current solution."""
+def _read(
+    solver: cp_model.CpSolver | cp_model.CpSolverSolutionCallback, em: ExactModel
+) -> Assignments:
+    """The assignment of the solver's current (or the callback's new) solution."""
     return Assignments.single(
         [solver.boolean_value(x) for x in em.a_first],
         [solver.boolean_value(f) for f in em.following],
     )
+
+
+class _Incumbents(cp_model.CpSolverSolutionCallback):
+    """Reports every improving solution as ``on_solution(wall_time_s, assignment)``."""
+
+    def __init__(self, em: ExactModel, on_solution: Callable[[float, Assignments], None]) -> None:
+        super().__init__()
+        self._em = em
+        self._on_solution = on_solution
+
+    def on_solution_callback(self) -> None:
+        self._on_solution(self.wall_time, _read(self, self._em))
 
 
 def solve(
@@ -277,13 +292,19 @@ def solve(
     seed: int = 0,
     workers: int = 1,
     hint: Assignments | None = None,
+    on_solution: Callable[[float, Assignments], None] | None = None,
 ) -> ExactResult | None:
-    """Best assignment CP-SAT finds within the time limit (None if it found none)."""
+    """Best assignment CP-SAT finds within the time limit (None if it found none).
+
+    ``on_solution`` (optional) sees every improving solution with its wall time,
+    e.g. for measuring how fast CP-SAT reaches a given cost.
+    """
     em = build_model(problem, cliques, objective)
     if hint is not None:
         em.add_hint(hint)
     solver = _params(time_limit_s, seed, workers)
-    status = solver.solve(em.model)
+    callback = None if on_solution is None else _Incumbents(em, on_solution)
+    status = solver.solve(em.model, callback)
     if status not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
         return None
     return ExactResult(_read(solver, em), status == cp_model.OPTIMAL, solver.objective_value)
