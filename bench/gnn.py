@@ -68,14 +68,17 @@ def delay_ratio(opt: float, cost: float, free: float) -> float:
     return (opt - free) / (cost - free)
 
 
-def run_gnn(stored: StoredModel, prep: Prepared, objective: str, samples: int) -> tuple[float, float]:
+def run_gnn(
+    stored: StoredModel, prep: Prepared, objective: str, samples: int
+) -> tuple[float, float]:
     """(cost, seconds) of the GNN-VAE on one problem, request overhead included."""
     start = time.perf_counter()
     cliques = find_cliques(prep.problem)
     evaluator = Evaluator(prep.problem)
     graph = graph_tensors(prep.problem, cliques)
-    _, cost = best_of(stored.model, graph, Decoder(prep.problem, cliques), evaluator,
-                      objective, samples, seed=0)
+    _, cost = best_of(
+        stored.model, graph, Decoder(prep.problem, cliques), evaluator, objective, samples, seed=0
+    )
     return cost, time.perf_counter() - start
 
 
@@ -85,15 +88,22 @@ def run_fcfs(prep: Prepared, objective: str) -> float:
     return float(ctx.evaluator.evaluate(fcfs(ctx).assignment).costs[objective][0])
 
 
-def small_rows(models: dict[str, StoredModel], cases: list[tuple[str, Prepared, float]],
-               label: str) -> list[dict[str, Any]]:
+def small_rows(
+    models: dict[str, StoredModel], cases: list[tuple[str, Prepared, float]], label: str
+) -> list[dict[str, Any]]:
     """Per-problem results on small problems with known optimum ``ref``."""
     rows = []
     for objective, prep, ref in tqdm(cases, desc=label, unit="problem"):
         free = Evaluator(prep.problem).free_costs()[objective]
-        row: dict[str, Any] = {"set": label, "objective": objective, "robots": prep.problem.n_robots,
-                               "conflicts": prep.problem.n_conflicts, "opt": ref, "free": free,
-                               "fcfs": run_fcfs(prep, objective)}
+        row: dict[str, Any] = {
+            "set": label,
+            "objective": objective,
+            "robots": prep.problem.n_robots,
+            "conflicts": prep.problem.n_conflicts,
+            "opt": ref,
+            "free": free,
+            "fcfs": run_fcfs(prep, objective),
+        }
         for s in SAMPLE_COUNTS:
             row[f"gnn{s}"], row[f"gnn{s}_s"] = run_gnn(models[objective], prep, objective, s)
         rows.append(row)
@@ -122,12 +132,21 @@ def conformance_cases(objectives: tuple[str, ...]) -> list[tuple[str, Prepared, 
         for line in (CONFORMANCE / name).read_text().splitlines():
             rec = json.loads(line)
             if rec["request"]["objective"] in objectives:
-                cases.append((rec["request"]["objective"], Prepared.of(rec["request"]), rec["ref_cost"]))
+                cases.append(
+                    (rec["request"]["objective"], Prepared.of(rec["request"]), rec["ref_cost"])
+                )
     return cases
 
 
-def large_rows(models: dict[str, StoredModel], sizes: list[int], densities: dict[str, float],
-               per_size: int, limit: float, objective: str, samples: int) -> list[dict[str, Any]]:
+def large_rows(
+    models: dict[str, StoredModel],
+    sizes: list[int],
+    densities: dict[str, float],
+    per_size: int,
+    limit: float,
+    objective: str,
+    samples: int,
+) -> list[dict[str, Any]]:
     """GNN-VAE against time-limited CP-SAT on stitched problems, side by side."""
     rows = []
     jobs = [(n, d, k) for n in sizes for d in densities for k in range(per_size)]
@@ -137,22 +156,34 @@ def large_rows(models: dict[str, StoredModel], sizes: list[int], densities: dict
         evaluator = Evaluator(prep.problem)
         trace: list[tuple[float, float]] = []
 
-        def record(t: float, assignment: Any, ev: Evaluator = evaluator) -> None:
-            trace.append((t, float(ev.evaluate(assignment).costs[objective][0])))
+        def record(t: float, assignment: Any, ev: Evaluator = evaluator, out: list = trace) -> None:
+            out.append((t, float(ev.evaluate(assignment).costs[objective][0])))
 
         start = time.perf_counter()
-        result = solve(prep.problem, find_cliques(prep.problem), objective, limit, on_solution=record)
+        result = solve(
+            prep.problem, find_cliques(prep.problem), objective, limit, on_solution=record
+        )
         exact_s = time.perf_counter() - start
         exact_cost = trace[-1][1] if trace else float("inf")
         reach = next((t for t, c in trace if c <= gnn_cost * (1 + 1e-9)), None)
         best = min(gnn_cost, exact_cost)
-        rows.append({
-            "robots": n, "density": dname, "conflicts": prep.problem.n_conflicts,
-            "objective": objective, "free": evaluator.free_costs()[objective],
-            "gnn": gnn_cost, "gnn_s": gnn_s, "exact": exact_cost, "exact_s": exact_s,
-            "exact_optimal": bool(result is not None and result.optimal),
-            "exact_reach_gnn_s": reach, "best": best, "fcfs": run_fcfs(prep, objective),
-        })
+        rows.append(
+            {
+                "robots": n,
+                "density": dname,
+                "conflicts": prep.problem.n_conflicts,
+                "objective": objective,
+                "free": evaluator.free_costs()[objective],
+                "gnn": gnn_cost,
+                "gnn_s": gnn_s,
+                "exact": exact_cost,
+                "exact_s": exact_s,
+                "exact_optimal": bool(result is not None and result.optimal),
+                "exact_reach_gnn_s": reach,
+                "best": best,
+                "fcfs": run_fcfs(prep, objective),
+            }
+        )
     return rows
 
 
@@ -162,8 +193,11 @@ def _ratio(ref: float, cost: float) -> float:
 
 def summarize_small(rows: list[dict[str, Any]]) -> list[str]:
     """Table lines: per set and objective, ratio / delay ratio per method, runtime."""
-    out = [f"{'set':10} {'objective':16} {'n':>5}  " + "  ".join(
-        f"{m:>17}" for m in ("fcfs", *[f"gnn S={s}" for s in SAMPLE_COUNTS])) + "  gnn100 ms"]
+    out = [
+        f"{'set':10} {'objective':16} {'n':>5}  "
+        + "  ".join(f"{m:>17}" for m in ("fcfs", *[f"gnn S={s}" for s in SAMPLE_COUNTS]))
+        + "  gnn100 ms"
+    ]
     keys = sorted({(r["set"], r["objective"]) for r in rows})
     for set_name, objective in keys:
         sel = [r for r in rows if r["set"] == set_name and r["objective"] == objective]
@@ -176,25 +210,34 @@ def summarize_small(rows: list[dict[str, Any]]) -> list[str]:
                 dr = np.mean([delay_ratio(r["opt"], r[m], r["free"]) for r in sel])
                 cells.append(f"{ratio:.4f} / {dr:.3f}")
         ms = 1e3 * np.mean([r["gnn100_s"] for r in sel])
-        out.append(f"{set_name:10} {objective:16} {len(sel):5d}  " + "  ".join(
-            f"{c:>17}" for c in cells) + f"  {ms:9.1f}")
-    out.append("cells: mean optimality ratio / mean delay ratio (avg_delay: mean gap to the optimum)")
+        out.append(
+            f"{set_name:10} {objective:16} {len(sel):5d}  "
+            + "  ".join(f"{c:>17}" for c in cells)
+            + f"  {ms:9.1f}"
+        )
+    out.append(
+        "cells: mean optimality ratio / mean delay ratio (avg_delay: mean gap to the optimum)"
+    )
     return out
 
 
 def summarize_large(rows: list[dict[str, Any]]) -> list[str]:
     """Table lines: per size and density, GNN-VAE vs CP-SAT side by side."""
-    out = [f"{'robots':>6} {'density':8} {'confl':>6} {'gnn ratio':>9} {'gnn dr':>7} {'gnn s':>7} "
-           f"{'exact ratio':>11} {'exact s':>8} {'proven':>6} {'exact->gnn s':>12} {'fcfs dr':>7}"]
+    out = [
+        f"{'robots':>6} {'density':8} {'confl':>6} {'gnn ratio':>9} {'gnn dr':>7} {'gnn s':>7} "
+        f"{'exact ratio':>11} {'exact s':>8} {'proven':>6} {'exact->gnn s':>12} {'fcfs dr':>7}"
+    ]
     for n in sorted({r["robots"] for r in rows}):
         for d in sorted({r["density"] for r in rows}):
             sel = [r for r in rows if r["robots"] == n and r["density"] == d]
             if not sel:
                 continue
             reach = [r["exact_reach_gnn_s"] for r in sel]
-            reach_txt = ("never" if all(x is None for x in reach) else
-                         f"{np.mean([x if x is not None else r['exact_s'] for x, r in zip(reach, sel)]):.2f}"
-                         + ("+" if any(x is None for x in reach) else ""))
+            capped = [r["exact_s"] if x is None else x for x, r in zip(reach, sel, strict=True)]
+            never = sum(x is None for x in reach)
+            reach_txt = (
+                "never" if never == len(sel) else f"{np.mean(capped):.2f}" + "+" * bool(never)
+            )
             out.append(
                 f"{n:6d} {d:8} {np.mean([r['conflicts'] for r in sel]):6.0f} "
                 f"{np.mean([_ratio(r['best'], r['gnn']) for r in sel]):9.4f} "
@@ -205,8 +248,10 @@ def summarize_large(rows: list[dict[str, Any]]) -> list[str]:
                 f"{sum(r['exact_optimal'] for r in sel):3d}/{len(sel):<2d} {reach_txt:>12} "
                 f"{np.mean([delay_ratio(r['best'], r['fcfs'], r['free']) for r in sel]):7.3f}"
             )
-    out.append("ratios against the best cost either method found; exact->gnn s: CP-SAT time to "
-               "reach the GNN-VAE's cost ('+': some never did within the limit, counted at the limit)")
+    out.append(
+        "ratios against the best cost either method found; exact->gnn s: CP-SAT time to "
+        "reach the GNN-VAE's cost ('+': some never did within the limit, counted at the limit)"
+    )
     return out
 
 
@@ -222,10 +267,18 @@ def plot_large(rows: list[dict[str, Any]], path: Path) -> None:
         sizes = sorted({r["robots"] for r in rows if r["density"] == d})
         for method, style in (("gnn", "-o"), ("exact", "--s")):
             sel = [[r for r in rows if r["robots"] == n and r["density"] == d] for n in sizes]
-            axes[0].plot(sizes, [np.mean([delay_ratio(r["best"], r[method], r["free"]) for r in s])
-                                 for s in sel], style, label=f"{method} {d}")
-            axes[1].plot(sizes, [np.mean([r[f"{method}_s"] for r in s]) for s in sel], style,
-                         label=f"{method} {d}")
+            axes[0].plot(
+                sizes,
+                [np.mean([delay_ratio(r["best"], r[method], r["free"]) for r in s]) for s in sel],
+                style,
+                label=f"{method} {d}",
+            )
+            axes[1].plot(
+                sizes,
+                [np.mean([r[f"{method}_s"] for r in s]) for s in sel],
+                style,
+                label=f"{method} {d}",
+            )
     axes[0].set(xlabel="robots", ylabel="mean delay ratio", title="quality vs best known")
     axes[1].set(xlabel="robots", ylabel="seconds", yscale="log", title="runtime")
     for ax in axes:
@@ -256,8 +309,15 @@ def main(argv: list[str] | None = None) -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     rows = small_rows(models, held_out_cases(args.small, OBJECTIVES), "held-out")
     rows += small_rows(models, conformance_cases(OBJECTIVES), "conform")
-    large = large_rows(models, args.sizes, {"sparse": 2.0, "dense": 4.0}, args.per_size,
-                       args.exact_limit, args.large_objective, args.samples)
+    large = large_rows(
+        models,
+        args.sizes,
+        {"sparse": 2.0, "dense": 4.0},
+        args.per_size,
+        args.exact_limit,
+        args.large_objective,
+        args.samples,
+    )
     lines = summarize_small(rows) + [""] + summarize_large(large)
     print("\n".join(lines))
     (args.out / "small.json").write_text(json.dumps(rows, indent=1))
