@@ -1,0 +1,80 @@
+"""The service's settings: one typed object, read from ``SCHEDULER_*`` environment variables.
+
+Example::
+
+    SCHEDULER_PORT=9000 SCHEDULER_SOLVE_CONCURRENCY=4 python -m service
+
+Routes read them through :func:`get_settings` (cached, so the environment is
+read once); tests replace them with ``app.dependency_overrides[get_settings]``.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from typing import Literal
+
+from pydantic import Field, field_validator
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+from service.solvers.dispatch import DispatchPolicy
+
+__all__ = ["MIB", "Settings", "get_settings"]
+
+MIB = 1024 * 1024
+# The largest options.time_limit_s a request may ask (service.core.schemas.OptionsIn).
+MAX_TIME_LIMIT_S = 300.0
+
+LogLevel = Literal["critical", "error", "warning", "info", "debug"]
+
+
+class Settings(BaseSettings):
+    """Everything an operator may tune, with the defaults the service ships with."""
+
+    model_config = SettingsConfigDict(env_prefix="SCHEDULER_", extra="ignore")
+
+    host: str = "127.0.0.1"
+    port: int = Field(default=8000, ge=1, le=65535)
+    log_level: LogLevel = "info"
+    # Solving: a request without options.time_limit_s gets this many seconds.
+    default_time_limit_s: float = Field(default=5.0, gt=0.0, le=MAX_TIME_LIMIT_S)
+    # Caps on what one request may ask (413 above them); they bound memory and solve time.
+    max_robots: int = Field(default=5000, ge=1)
+    max_nodes: int = Field(default=100_000, ge=1)
+    max_conflicts: int = Field(default=200_000, ge=0)
+    max_body_bytes: int = Field(default=50 * MIB, ge=1)
+    # Routing of solver "auto": exact up to this many robots, large_solver above.
+    exact_max_robots: int = Field(default=30, ge=0)
+    large_solver: str = "exact"
+    # CP-SAT workers per solve, and how many solves run at once in worker threads;
+    # their product should not exceed the machine's cores.
+    exact_workers: int = Field(default=1, ge=1)
+    solve_concurrency: int = Field(default=2, ge=1)
+
+    @field_validator("log_level", mode="before")
+    @classmethod
+    def _lower_log_level(cls, value: object) -> object:
+        """Accept ``INFO`` as well as ``info``."""
+        return value.lower() if isinstance(value, str) else value
+
+    @field_validator("large_solver")
+    @classmethod
+    def _concrete_solver(cls, value: str) -> str:
+        """``auto`` would route to itself; the solver must be a concrete one."""
+        if value == "auto":
+            raise ValueError("large_solver must name a concrete solver, not 'auto'")
+        return value
+
+    def dispatch_policy(self) -> DispatchPolicy:
+        """The routing and limits :func:`service.solvers.dispatch.dispatch` applies."""
+        return DispatchPolicy(
+            default_time_limit_s=self.default_time_limit_s,
+            exact_max_robots=self.exact_max_robots,
+            large_solver=self.large_solver,
+            exact_workers=self.exact_workers,
+        )
+
+
+@lru_cache
+def get_settings() -> Settings:
+    """The process's settings, read from the environment once."""
+    return Settings()
