@@ -1,0 +1,155 @@
+"""The API's errors and the one function that renders them.
+
+Exception tree (each class carries its HTTP status and the ``reason`` label of
+the rejected-requests metric)::
+
+    ApiError
+    ├── InvalidRequest   422  the body fails the schema, or is not JSON       (validation)
+    ├── ProblemInvalid   422  well-typed, but breaks a cross-field rule       (problem_rule)
+    ├── TooLarge         413  body bytes, robots, nodes or conflicts over cap (too_large)
+    └── Unavailable      503  anything unexpected; logged, never a 500        (internal)
+
+422 bodies keep FastAPI's format, ``{"detail": [{"loc", "msg", "type"}]}``; the
+others are ``{"detail": "<message>"}``. Validation errors do not echo the
+offending input back: it may be huge, and NaN is not valid JSON.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any, ClassVar
+
+from fastapi import Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+from service.api.metrics import Metrics
+from service.core.problem import ProblemError
+
+__all__ = [
+    "ApiError",
+    "CatchAllMiddleware",
+    "InvalidRequest",
+    "ProblemInvalid",
+    "TooLarge",
+    "Unavailable",
+    "error_response",
+    "handle_api_error",
+    "handle_validation_error",
+]
+
+log = logging.getLogger(__name__)
+
+Detail = str | list[dict[str, Any]]
+
+
+class ApiError(Exception):
+    """Base of every error the API renders; subclasses fix the status and metric reason."""
+
+    status_code: ClassVar[int]
+    reason: ClassVar[str]
+
+    def __init__(self, detail: Detail) -> None:
+        super().__init__(detail)
+        self.detail = detail
+
+
+class InvalidRequest(ApiError):
+    """The body is not JSON or does not match the request schema."""
+
+    status_code = 422
+    reason = "validation"
+
+    @classmethod
+    def from_validation(cls, exc: RequestValidationError) -> InvalidRequest:
+        """Keep ``loc``, ``msg`` and ``type`` of each pydantic error (and JSON syntax details)."""
+        items = []
+        for err in exc.errors():
+            msg = err["msg"]
+            if err["type"] == "json_invalid" and "error" in err.get("ctx", {}):
+                msg = f"{msg}: {err['ctx']['error']}"
+            items.append({"loc": list(err["loc"]), "msg": msg, "type": err["type"]})
+        return cls(items)
+
+
+class ProblemInvalid(ApiError):
+    """The request is well-typed but breaks a rule spanning several fields."""
+
+    status_code = 422
+    reason = "problem_rule"
+
+    @classmethod
+    def from_problem_error(cls, exc: ProblemError) -> ProblemInvalid:
+        return cls([e.as_dict() for e in exc.errors])
+
+
+class TooLarge(ApiError):
+    """The body or the problem exceeds a configured cap."""
+
+    status_code = 413
+    reason = "too_large"
+
+
+class Unavailable(ApiError):
+    """Something unexpected went wrong; the cause is in the log."""
+
+    status_code = 503
+    reason = "internal"
+
+
+def error_response(exc: ApiError, metrics: Metrics) -> JSONResponse:
+    """Render ``exc`` and count the rejection."""
+    metrics.rejected.labels(exc.reason).inc()
+    return JSONResponse({"detail": exc.detail}, status_code=exc.status_code)
+
+
+async def handle_api_error(request: Request, exc: ApiError) -> JSONResponse:
+    """Exception handler for :class:`ApiError` raised in routes and dependencies."""
+    return error_response(exc, request.app.state.metrics)
+
+
+async def handle_validation_error(request: Request, exc: RequestValidationError) -> JSONResponse:
+    """Exception handler replacing FastAPI's default for request validation errors."""
+    return await handle_api_error(request, InvalidRequest.from_validation(exc))
+
+
+class CatchAllMiddleware:
+    """Renders errors raised outside the routes, and turns anything unexpected into a 503.
+
+    Starlette's own catch-all (``ServerErrorMiddleware``) answers 500 and re-raises;
+    this sits inside it so no exception ever reaches it while a response can still be sent.
+    """
+
+    def __init__(self, app: ASGIApp, metrics: Metrics) -> None:
+        self.app = app
+        self.metrics = metrics
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        started = False
+
+        async def send_tracked(message: Message) -> None:
+            nonlocal started
+            started = started or message["type"] == "http.response.start"
+            await send(message)
+
+        try:
+            await self.app(scope, receive, send_tracked)
+        except Exception as exc:
+            if started:
+                raise
+            await error_response(_as_api_error(exc, scope), self.metrics)(scope, receive, send)
+
+
+def _as_api_error(exc: Exception, scope: Scope) -> ApiError:
+    """``exc`` itself when it is an :class:`ApiError`; else log it and make it a 503."""
+    if isinstance(exc, ApiError):
+        return exc
+    log.exception("unexpected error in %s %s", scope["method"], scope["path"])
+    return Unavailable(
+        f"the scheduler failed unexpectedly ({type(exc).__name__}); the error was logged, "
+        "retry later or report it"
+    )

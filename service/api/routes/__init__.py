@@ -1,0 +1,1 @@
+"""One router per concern: schedules, health probes, metrics."""

@@ -1,0 +1,69 @@
+"""What the lifespan prepares and the routes read: solve policy, thread limiter, readiness."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+from anyio import CapacityLimiter
+
+from service.core.schemas import ScheduleRequest
+from service.solvers.dispatch import LAST_RESORT, DispatchPolicy, dispatch
+from service.solvers.registry import solver_names
+
+__all__ = ["WARMUP_REQUEST", "Runtime", "missing_solvers", "warm_up"]
+
+log = logging.getLogger(__name__)
+
+# Solved once at start-up so the evaluator's numba kernel is compiled (or loaded from its
+# cache) and CP-SAT is loaded before the service reports ready: two robots, one conflict.
+WARMUP_REQUEST = ScheduleRequest.model_validate(
+    {
+        "robots": [
+            {"id": "a", "nodes": [{"id": "a0", "enter": 0.0, "exit": 2.0}], "goal_time": 3.0},
+            {"id": "b", "nodes": [{"id": "b0", "enter": 1.0, "exit": 3.0, "density": 2}]},
+        ],
+        "conflicts": [{"a": "a0", "b": "b0", "a_enter": 0.5, "a_exit": 1.5}],
+        "options": {"solver": "exact", "time_limit_s": 10.0},
+    }
+)
+
+
+@dataclass(eq=False)
+class Runtime:
+    """Per-app state built by the lifespan; ``ready`` turns true once warm-up succeeded."""
+
+    policy: DispatchPolicy
+    limiter: CapacityLimiter
+    ready: bool = False
+    detail: str = "warming up"
+
+    @property
+    def models(self) -> dict[str, str]:
+        """Loaded learned models: objective -> model name."""
+        return {objective: m.name for objective, m in self.policy.models.items()}
+
+
+def missing_solvers(policy: DispatchPolicy) -> list[str]:
+    """Solvers the policy can route to that are not registered."""
+    needed = ("exact", policy.large_solver, LAST_RESORT)
+    return sorted(set(needed) - set(solver_names()))
+
+
+def warm_up(runtime: Runtime) -> None:
+    """Solve :data:`WARMUP_REQUEST` once (blocking), then mark ``runtime`` ready.
+
+    Failure leaves the service live but not ready, with the reason in ``runtime.detail``.
+    """
+    missing = missing_solvers(runtime.policy)
+    if missing:
+        runtime.detail = f"solvers not registered: {', '.join(missing)}"
+        log.error("not ready: %s", runtime.detail)
+        return
+    try:
+        dispatch(WARMUP_REQUEST, runtime.policy)
+    except Exception as exc:
+        runtime.detail = f"warm-up failed: {type(exc).__name__}: {exc}"
+        log.exception("not ready: warm-up failed")
+        return
+    runtime.ready, runtime.detail = True, "ready"
