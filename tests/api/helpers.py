@@ -1,0 +1,68 @@
+"""Helpers of the HTTP tests: posting, waiting for readiness, checking answers independently."""
+
+from __future__ import annotations
+
+import json
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+import anyio
+import httpx
+import numpy as np
+import pytest
+
+from service.core.assignment import Assignments
+from service.core.check import check
+from service.core.cliques import find_cliques
+from service.core.evaluate import Evaluator
+from service.core.problem import problem_from_request
+from service.core.schemas import ScheduleRequest
+
+TINY = Path(__file__).parents[2] / "schemas" / "examples" / "tiny.json"
+READY_TIMEOUT_S = 60.0
+
+
+async def wait_ready(client: httpx.AsyncClient) -> httpx.Response:
+    """Poll ``/readyz`` until it answers 200 (bounded)."""
+    with anyio.fail_after(READY_TIMEOUT_S):
+        while (response := await client.get("/readyz")).status_code != 200:
+            await anyio.sleep(0.01)
+    return response
+
+
+async def post_json(client: httpx.AsyncClient, body: Any) -> httpx.Response:
+    """POST ``body`` to /v1/schedules as JSON; NaN and Infinity are sent as JS literals."""
+    return await client.post(
+        "/v1/schedules", content=json.dumps(body), headers={"content-type": "application/json"}
+    )
+
+
+def assert_valid_answer(request: dict[str, Any], answer: dict[str, Any]) -> None:
+    """Check ``answer`` against ``request`` independently of the service's own checks.
+
+    Every conflict appears exactly once in the assignment, the schedule has one entry
+    per robot with its nodes in order, and the assignment mapped back to indices
+    passes :func:`service.core.check.check` and costs what the answer says.
+    """
+    objective = request.get("objective", "avg_completion")
+    request_conflicts = request.get("conflicts", [])
+    conflicts = [frozenset((c["a"], c["b"])) for c in request_conflicts]
+    decided = Counter(frozenset((x["from"], x["to"])) for x in answer["assignment"])
+    assert decided == Counter(conflicts) and max(decided.values(), default=1) == 1
+    assert answer["checks"] == {"acyclic": True, "density": True}
+    assert answer["objective"] == objective
+    assert answer["cost"] == answer["costs"][objective]
+    assert [s["robot"] for s in answer["schedule"]] == [r["id"] for r in request["robots"]]
+    for robot, entry in zip(request["robots"], answer["schedule"], strict=True):
+        assert [n["id"] for n in entry["nodes"]] == [n["id"] for n in robot["nodes"]]
+    problem = problem_from_request(ScheduleRequest.model_validate(request))
+    first = {frozenset((x["from"], x["to"])): x for x in answer["assignment"]}
+    chosen = [first[pair] for pair in conflicts]
+    assignments = Assignments.single(
+        np.array([x["from"] == c["a"] for x, c in zip(chosen, request_conflicts, strict=True)]),
+        np.array([x["type"] == "following" for x in chosen]),
+    )
+    assert check(problem, find_cliques(problem), assignments).ok[0]
+    cost = Evaluator(problem).evaluate(assignments).costs[objective][0]
+    assert cost == pytest.approx(answer["cost"], rel=1e-9, abs=1e-9)
