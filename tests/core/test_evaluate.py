@@ -1,0 +1,346 @@
+"""The evaluator: hand-computed cases, the trap, batching, and the brute-force reference."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import pytest
+
+from service.core.assignment import Assignments
+from service.core.check import check
+from service.core.cliques import find_cliques
+from service.core.evaluate import Evaluation, Evaluator
+from service.core.problem import Problem, problem_from_request
+from service.core.schemas import OBJECTIVES, ScheduleRequest
+from service.learning.generate import small_problem
+from tests.reference import (
+    OBJECTIVE_NAMES,
+    costs,
+    is_acyclic,
+    least_times,
+    reference_problem,
+    tiny_request,
+    trap_request,
+)
+
+EXCLUSIVE, FOLLOWING = False, True
+
+
+def _problem(req: dict[str, Any]) -> Problem:
+    return problem_from_request(ScheduleRequest.model_validate(req))
+
+
+def _evaluate(req: dict[str, Any], a_first: list[bool], following: list[bool]) -> tuple:
+    problem = _problem(req)
+    ev = Evaluator(problem)
+    return problem, ev, ev.evaluate(Assignments.single(a_first, following))
+
+
+def _delays(problem: Problem, ev: Evaluator, result: Evaluation) -> list[list[float]]:
+    """D at every time point, per robot."""
+    d = ev.delays_at(result, 0, np.arange(problem.tp_time.size))
+    return [
+        d[problem.tp_start[r] : problem.tp_start[r + 1]].tolist() for r in range(problem.n_robots)
+    ]
+
+
+def _costs(result: Evaluation) -> dict[str, float]:
+    return {k: float(v[0]) for k, v in result.costs.items()}
+
+
+def _robot(rid: str, *nodes: tuple[float, float], goal: float | None = None) -> dict[str, Any]:
+    robot: dict[str, Any] = {
+        "id": rid,
+        "nodes": [
+            {"id": f"{rid}{k}", "enter": e, "exit": x, "density": 3}
+            for k, (e, x) in enumerate(nodes)
+        ],
+    }
+    if goal is not None:
+        robot["goal_time"] = goal
+    return robot
+
+
+# Two robots, one conflict, pair sections strictly inside the nodes:
+#   a: node a0 [0, 10], section [4, 8]  -> time points a: 0, 4, 8, 10
+#   b: node b0 [1, 9],  section [3, 5]  -> time points b: 1, 3, 5, 9
+TWO = {
+    "robots": [_robot("a", (0.0, 10.0)), _robot("b", (1.0, 9.0))],
+    "conflicts": [
+        {"a": "a0", "b": "b0", "a_enter": 4.0, "a_exit": 8.0, "b_enter": 3.0, "b_exit": 5.0}
+    ],
+}
+
+
+def test_two_robots_exclusive_inside_nodes() -> None:
+    problem, ev, result = _evaluate(TWO, [True], [EXCLUSIVE])
+    # a -> b exclusive: T~_b(3) >= T~_a(8) = 8, so D_b(3) = 8 - 3 = 5 and D_b stays 5 after;
+    # D_b(1) = 0 (before b's pair enter). a never waits.
+    assert problem.tp_time.tolist() == [0, 4, 8, 10, 1, 3, 5, 9]
+    assert _delays(problem, ev, result) == [[0, 0, 0, 0], [0, 5, 5, 5]]
+    # completion a = 10, b = 9 + 5 = 14.
+    assert result.completion[0].tolist() == [10, 14]
+    assert result.converged.tolist() == [True]
+    assert _costs(result) == pytest.approx(
+        {
+            "avg_completion": 12.0,  # (10 + 14) / 2
+            "max_completion": 14.0,
+            "sync_completion": 14.0,  # 12 + (|10 - 12| + |14 - 12|) / 2
+            "avg_delay": 1.875,  # (0 / 4 + (0 + 5 + 5 + 5) / 4) / 2 = 3.75 / 2
+        }
+    )
+
+
+def test_two_robots_following_inside_nodes() -> None:
+    problem, ev, result = _evaluate(TWO, [True], [FOLLOWING])
+    # a -> b following: T~_b(3) >= T~_a(4) = 4, so D_b(3) = 4 - 3 = 1 from b's pair enter on.
+    assert _delays(problem, ev, result) == [[0, 0, 0, 0], [0, 1, 1, 1]]
+    # completion a = 10, b = 9 + 1 = 10.
+    assert result.completion[0].tolist() == [10, 10]
+    assert _costs(result) == pytest.approx(
+        {
+            "avg_completion": 10.0,
+            "max_completion": 10.0,
+            "sync_completion": 10.0,  # no spread
+            "avg_delay": 0.375,  # (0 + (0 + 1 + 1 + 1) / 4) / 2
+        }
+    )
+
+
+def test_two_robots_other_direction() -> None:
+    problem, ev, result = _evaluate(TWO, [False], [EXCLUSIVE])
+    # b -> a exclusive: T~_a(4) >= T~_b(5) = 5, so D_a = 1 from a's pair enter (4) on.
+    assert _delays(problem, ev, result) == [[0, 1, 1, 1], [0, 0, 0, 0]]
+    # completion a = 10 + 1 = 11, b = 9: avg 10, sync 10 + (1 + 1) / 2 = 11.
+    assert _costs(result) == pytest.approx(
+        {
+            "avg_completion": 10.0,
+            "max_completion": 11.0,
+            "sync_completion": 11.0,
+            "avg_delay": 0.375,
+        }
+    )
+
+
+# A chain a -> b -> c (whole nodes as sections), c with a second node after the conflict:
+#   a: [0, 4];  b: [2, 6];  c: [5, 9], [11, 12]
+CHAIN = {
+    "robots": [
+        _robot("a", (0.0, 4.0)),
+        _robot("b", (2.0, 6.0)),
+        _robot("c", (5.0, 9.0), (11.0, 12.0)),
+    ],
+    "conflicts": [{"a": "a0", "b": "b0"}, {"a": "b0", "b": "c0"}],
+}
+
+
+def test_chain_of_three_propagates_delays() -> None:
+    problem, ev, result = _evaluate(CHAIN, [True, True], [EXCLUSIVE, EXCLUSIVE])
+    # a -> b: T~_b(2) >= T~_a(4) = 4            -> D_b = 2, so T~_b(6) = 8.
+    # b -> c: T~_c(5) >= T~_b(6) = 6 + D_b = 8  -> D_c = 3 at 5 and, never decreasing, at 9, 11, 12.
+    assert _delays(problem, ev, result) == [[0, 0], [2, 2], [3, 3, 3, 3]]
+    # completions 4, 8, 12 + 3 = 15.
+    assert result.completion[0].tolist() == [4, 8, 15]
+    assert _costs(result) == pytest.approx(
+        {
+            "avg_completion": 9.0,  # (4 + 8 + 15) / 3
+            "max_completion": 15.0,
+            "sync_completion": 13.0,  # 9 + (5 + 1 + 6) / 3
+            "avg_delay": 5.0 / 3.0,  # (0 + 2 + 3) / 3
+        }
+    )
+
+
+def test_chain_following_propagates_pair_enter() -> None:
+    problem, ev, result = _evaluate(CHAIN, [True, True], [FOLLOWING, FOLLOWING])
+    # a -> b following: T~_b(2) >= T~_a(0) = 0 -> no wait;
+    # b -> c following: T~_c(5) >= T~_b(2) = 2 -> no wait.
+    assert _delays(problem, ev, result) == [[0, 0], [0, 0], [0, 0, 0, 0]]
+    assert _costs(result)["avg_completion"] == pytest.approx((4 + 6 + 12) / 3)
+
+
+def test_goal_time_after_last_node() -> None:
+    req = {
+        "robots": [_robot("a", (0.0, 4.0), goal=7.0), _robot("b", (1.0, 5.0))],
+        "conflicts": [{"a": "a0", "b": "b0"}],
+    }
+    problem, ev, result = _evaluate(req, [False], [EXCLUSIVE])
+    # b -> a exclusive: T~_a(0) >= T~_b(5) = 5 -> D_a = 5 at a's time points 0, 4 and goal 7.
+    assert problem.tp_time[: problem.tp_start[1]].tolist() == [0, 4, 7]
+    assert _delays(problem, ev, result) == [[5, 5, 5], [0, 0]]
+    # completion is the (delayed) goal time: 7 + 5 = 12, not the last exit 4 + 5 = 9.
+    assert result.completion[0].tolist() == [12, 5]
+    assert _costs(result) == pytest.approx(
+        {
+            "avg_completion": 8.5,  # (12 + 5) / 2
+            "max_completion": 12.0,
+            "sync_completion": 12.0,  # 8.5 + (3.5 + 3.5) / 2
+            "avg_delay": 2.5,  # ((5 + 5 + 5) / 3 + 0) / 2
+        }
+    )
+    # Zero delay: completion is the goal time itself.
+    assert ev.free_costs()["max_completion"] == 7.0
+
+
+def test_avg_delay_averages_over_time_points() -> None:
+    # b waits twice: for a at its first node, then longer for c at its second node.
+    #   a: [0, 10] section [4, 8]
+    #   b: [1, 9] section [3, 5] (with a), [10, 12] section [10, 11] (with c), goal 13
+    #   c: [0, 20] section [14, 16]
+    req = {
+        "robots": [
+            _robot("a", (0.0, 10.0)),
+            _robot("b", (1.0, 9.0), (10.0, 12.0), goal=13.0),
+            _robot("c", (0.0, 20.0)),
+        ],
+        "conflicts": [
+            {"a": "a0", "b": "b0", "a_enter": 4.0, "a_exit": 8.0, "b_enter": 3.0, "b_exit": 5.0},
+            {
+                "a": "c0",
+                "b": "b1",
+                "a_enter": 14.0,
+                "a_exit": 16.0,
+                "b_enter": 10.0,
+                "b_exit": 11.0,
+            },
+        ],
+    }
+    problem, ev, result = _evaluate(req, [True, True], [EXCLUSIVE, EXCLUSIVE])
+    # b's time points: 1, 3, 5, 9, 10, 11, 12, 13.
+    # a -> b: T~_b(3) >= 8 -> D_b(3) = 5.   c -> b: T~_b(10) >= T~_c(16) = 16 -> D_b(10) = 6.
+    # D_b = 0, 5, 5, 5, 6, 6, 6, 6 -> mean 39 / 8.
+    assert _delays(problem, ev, result)[1] == [0, 5, 5, 5, 6, 6, 6, 6]
+    # a and c never wait: avg_delay = (0 + 39/8 + 0) / 3 = 13 / 8.
+    assert _costs(result)["avg_delay"] == pytest.approx(13.0 / 8.0)
+    # completions 10, 13 + 6 = 19, 20.
+    assert result.completion[0].tolist() == [10, 19, 20]
+
+
+def test_sync_completion_penalises_spread() -> None:
+    # Same average completion, different spread: sync = avg + mean |c_i - avg|.
+    # a -> b exclusive (TWO): completions 10, 14 -> 12 + 2 = 14;
+    # b -> a following: T~_a(4) >= T~_b(3) = 3 -> no wait: completions 10, 9 -> 9.5 + 0.5 = 10.
+    _, _, first = _evaluate(TWO, [True], [EXCLUSIVE])
+    _, _, second = _evaluate(TWO, [False], [FOLLOWING])
+    assert _costs(first)["sync_completion"] == pytest.approx(14.0)
+    assert _costs(second)["sync_completion"] == pytest.approx(10.0)
+    assert _costs(second)["avg_completion"] == pytest.approx(9.5)
+
+
+def test_no_conflicts_is_free() -> None:
+    req = {"robots": [_robot("a", (0.0, 4.0), goal=5.0), _robot("b", (1.0, 3.0))]}
+    problem, ev, result = _evaluate(req, [], [])
+    assert result.completion[0].tolist() == [5, 3]
+    assert _costs(result) == pytest.approx(ev.free_costs())
+    assert _costs(result)["sync_completion"] == pytest.approx(4.0 + 1.0)
+
+
+# --- the three-robot trap ------------------------------------------------------------------------
+
+
+def test_trap_node_cycle_without_waiting_has_finite_times() -> None:
+    problem = _problem(trap_request())
+    ev = Evaluator(problem)
+    cycle = Assignments.single([False] * 3, [False] * 3)  # b -> a, c -> b, a -> c
+    result = ev.evaluate(cycle)
+    # b -> a: T~_a(8) >= T~_b(2) = 2; c -> b: T~_b(8) >= T~_c(2); a -> c: T~_c(8) >= T~_a(2):
+    # every wait is already satisfied by the plan, so the least times are the plan.
+    assert result.converged.tolist() == [True]
+    assert result.completion[0].tolist() == [10, 10, 10]
+    assert _costs(result) == pytest.approx(
+        {"avg_completion": 10.0, "max_completion": 10.0, "sync_completion": 10.0, "avg_delay": 0.0}
+    )
+    # ... and yet it is a node cycle, which the checker must reject.
+    assert check(problem, find_cliques(problem), cycle).acyclic.tolist() == [False]
+
+
+def test_trap_positive_cycle_does_not_converge() -> None:
+    problem = _problem(trap_request())
+    result = Evaluator(problem).evaluate(Assignments.single([True] * 3, [False] * 3))
+    # a -> b: T~_b(0) >= T~_a(10); b -> c: T~_c(0) >= T~_b(10); c -> a: T~_a(0) >= T~_c(10):
+    # each lap adds 10 to everything, so no least times exist.
+    assert result.converged.tolist() == [False]
+    assert all(math.isinf(float(v[0])) for v in result.costs.values())
+    assert least_times(reference_problem(trap_request()), [True] * 3, [False] * 3) is None
+
+
+def test_zero_weight_cycle_has_finite_least_times() -> None:
+    """A node cycle of following-type conflicts whose pair sections all start at 0.
+
+    a -> b: T~_b(0) >= T~_a(0); b -> c: T~_c(0) >= T~_b(0); c -> a: T~_a(0) >= T~_c(0).
+    The plan itself satisfies all three (a cycle of weight zero), so, as in the
+    trap, the least times exist and are the plan: costs 10 each.
+    """
+    req = trap_request()
+    for robot in req["robots"]:
+        robot["nodes"][0]["density"] = 3
+    for c in req["conflicts"]:
+        c.update(a_enter=0.0, a_exit=2.0, b_enter=0.0, b_exit=2.0)
+    assignment = ([True] * 3, [FOLLOWING] * 3)
+    ref = reference_problem(req)
+    assert least_times(ref, *assignment) == [[0, 2, 10]] * 3
+    problem, _, result = _evaluate(req, *assignment)
+    assert result.completion[0].tolist() == [10, 10, 10]
+    assert _costs(result)["avg_completion"] == 10.0
+
+
+# --- batches and the brute-force reference ---------------------------------------------------
+
+
+def _random_batch(problem: Problem, seed: int, size: int) -> Assignments:
+    rng = np.random.default_rng(seed)
+    shape = (size, problem.n_conflicts)
+    return Assignments(rng.random(shape) < 0.5, rng.random(shape) < 0.5)
+
+
+def test_batch_equals_one_by_one() -> None:
+    for seed in range(10):
+        problem = _problem(small_problem(seed))
+        ev = Evaluator(problem)
+        batch = _random_batch(problem, seed, 16)
+        together = ev.evaluate(batch)
+        for s in range(batch.n_samples):
+            alone = ev.evaluate(batch.take(s))
+            np.testing.assert_array_equal(together.event_delay[s], alone.event_delay[0])
+            np.testing.assert_array_equal(together.completion[s], alone.completion[0])
+            assert together.converged[s] == alone.converged[0]
+            for k in OBJECTIVES:  # avg_delay is a matrix product: equal up to rounding
+                assert together.costs[k][s] == pytest.approx(alone.costs[k][0], rel=1e-12)
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_least_times_equal_brute_force(seed: int) -> None:
+    """On random assignments (cyclic ones included) of random small problems."""
+    req = small_problem(seed) if seed % 2 else tiny_request(seed)
+    problem = _problem(req)
+    ref = reference_problem(req)
+    # The time points are the contract's: sorted distinct times per robot.
+    assert [
+        problem.tp_time[problem.tp_start[r] : problem.tp_start[r + 1]].tolist()
+        for r in range(problem.n_robots)
+    ] == ref.time_points
+    ev = Evaluator(problem)
+    batch = _random_batch(problem, seed, 24)
+    result = ev.evaluate(batch)
+    for s in range(batch.n_samples):
+        a_first, following = batch.a_first[s].tolist(), batch.following[s].tolist()
+        times = least_times(ref, a_first, following)
+        if not result.converged[s]:
+            # Never for an acyclic assignment; for a cyclic one the least times may or may
+            # not exist (see the trap), but a positive cycle always means not converged.
+            assert not is_acyclic(ref, a_first)
+            continue
+        assert times is not None
+        expect = [
+            t - p
+            for ts, ps in zip(times, ref.time_points, strict=True)
+            for t, p in zip(ts, ps, strict=True)
+        ]
+        got = ev.delays_at(result, s, np.arange(problem.tp_time.size))
+        np.testing.assert_allclose(got, expect, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(result.completion[s], [t[-1] for t in times], rtol=1e-12)
+        want = costs(ref, times)
+        for k in OBJECTIVE_NAMES:
+            assert result.costs[k][s] == pytest.approx(want[k], rel=1e-12, abs=1e-9)
