@@ -1,0 +1,109 @@
+"""Density cliques and their budgets of following-type conflicts."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pytest
+
+from service.core.cliques import Cliques, budget_for, find_cliques
+from service.core.problem import Problem, problem_from_request
+from service.core.schemas import ScheduleRequest
+from service.learning.generate import small_problem
+from tests.reference import density_groups, reference_problem, tiny_request
+
+
+def _problem(req: dict[str, Any]) -> Problem:
+    return problem_from_request(ScheduleRequest.model_validate(req))
+
+
+def _groups(cl: Cliques) -> set[tuple[frozenset[int], int]]:
+    """Each clique as (its conflicts, its budget)."""
+    return {
+        (frozenset(cl.edge[cl.start[q] : cl.start[q + 1]].tolist()), int(cl.budget[q]))
+        for q in range(cl.budget.size)
+    }
+
+
+def _crowd(densities: list[int], pairs: list[tuple[int, int]], **extra: Any) -> dict[str, Any]:
+    """One robot per density, each with one node [0, 10]; a conflict per pair."""
+    return {
+        "robots": [
+            {"id": f"r{i}", "nodes": [{"id": f"v{i}", "enter": 0.0, "exit": 10.0, "density": d}]}
+            for i, d in enumerate(densities)
+        ],
+        "conflicts": [{"a": f"v{i}", "b": f"v{j}"} for i, j in pairs],
+        **extra,
+    }
+
+
+@pytest.mark.parametrize(("rho", "h"), [(1, 0), (2, 2), (3, 5), (4, 9)])
+def test_budget(rho: int, h: int) -> None:
+    # h = rho (rho + 1) / 2 - 1: 1 -> 0, 2 -> 3 - 1 = 2, 3 -> 6 - 1 = 5, 4 -> 10 - 1 = 9.
+    assert budget_for(rho) == h
+
+
+def test_triangle_is_one_clique_with_min_density() -> None:
+    cl = find_cliques(_problem(_crowd([3, 2, 3], [(0, 1), (1, 2), (0, 2)])))
+    # One maximal clique {v0, v1, v2} holding all three conflicts; rho = min(3, 2, 3) = 2.
+    assert _groups(cl) == {(frozenset({0, 1, 2}), 2)}
+    assert cl.size.tolist() == [3]
+    assert cl.binding().tolist() == [True]  # 0 < 2 < 3
+    assert cl.forbidden().tolist() == [False] * 3
+    following = np.array([[True, True, False], [True, True, True]])
+    assert cl.following_counts(following).tolist() == [[2], [3]]
+
+
+def test_triangle_with_density_one_forbids_following() -> None:
+    cl = find_cliques(_problem(_crowd([3, 1, 3], [(0, 1), (1, 2), (0, 2)])))
+    assert _groups(cl) == {(frozenset({0, 1, 2}), 0)}
+    assert cl.forbidden().tolist() == [True] * 3
+    assert cl.binding().tolist() == [False]
+
+
+def test_path_is_two_cliques() -> None:
+    # v0 - v1 - v2 without v0 - v2: maximal cliques {v0, v1} and {v1, v2}.
+    cl = find_cliques(_problem(_crowd([2, 3, 1], [(0, 1), (1, 2)])))
+    assert _groups(cl) == {(frozenset({0}), 2), (frozenset({1}), 0)}
+    assert cl.forbidden().tolist() == [False, True]
+    assert not cl.binding().any()  # budget 2 >= 1 conflict; budget 0 is "forbidden", not binding
+
+
+def test_four_clique() -> None:
+    pairs = [(i, j) for i in range(4) for j in range(i + 1, 4)]
+    cl = find_cliques(_problem(_crowd([3, 3, 3, 3], pairs)))
+    assert _groups(cl) == {(frozenset(range(6)), 5)}  # 6 conflicts, h(3) = 5: binding
+    assert cl.binding().tolist() == [True]
+
+
+def test_explicit_limits_add_cliques() -> None:
+    limits = [
+        {"nodes": ["v0", "v1", "v2"], "max_robots": 1},  # h(1) = 0 over the whole triangle
+        {"nodes": ["v2", "v0"], "max_robots": 2},  # h(2) = 2 over conflict 2 alone
+    ]
+    req = _crowd([3, 3, 3], [(0, 1), (1, 2), (0, 2)], density_limits=limits)
+    cl = find_cliques(_problem(req))
+    assert _groups(cl) == {
+        (frozenset({0, 1, 2}), 5),  # the maximal clique, rho = 3
+        (frozenset({0, 1, 2}), 0),  # first limit
+        (frozenset({2}), 2),  # second limit
+    }
+    assert cl.forbidden().tolist() == [True] * 3
+
+
+def test_no_conflicts_no_cliques() -> None:
+    cl = find_cliques(_problem({"robots": _crowd([2, 2], [])["robots"]}))
+    assert cl.budget.size == 0
+    assert cl.following_counts(np.zeros((3, 0), dtype=bool)).shape == (3, 0)
+    assert cl.forbidden().shape == (0,)
+
+
+@pytest.mark.parametrize("seed", range(30))
+def test_cliques_equal_brute_force(seed: int) -> None:
+    req = tiny_request(seed) if seed % 2 else small_problem(seed)
+    cl = find_cliques(_problem(req))
+    # Every incidence once per clique, grouped by clique.
+    assert cl.start[0] == 0 and cl.start[-1] == cl.edge.size
+    assert np.all(cl.size >= 1)
+    assert _groups(cl) == set(density_groups(reference_problem(req)))
