@@ -21,7 +21,7 @@ from service.api.errors import (
     handle_validation_error,
 )
 from service.api.metrics import Metrics
-from service.api.middleware import BodyLimitMiddleware, RequestMetricsMiddleware
+from service.api.middleware import RequestMetricsMiddleware
 from service.api.routes import health, metrics, schedules
 from service.api.runtime import Runtime, warm_up
 
@@ -53,7 +53,6 @@ def create_app() -> FastAPI:
     app.add_exception_handler(ApiError, handle_api_error)
     app.add_exception_handler(RequestValidationError, handle_validation_error)
     # Added innermost first: metrics see every response, the catch-all every exception.
-    app.add_middleware(BodyLimitMiddleware, max_bytes=lambda: resolve_settings(app).max_body_bytes)
     app.add_middleware(CatchAllMiddleware, metrics=app.state.metrics)
     app.add_middleware(RequestMetricsMiddleware, metrics=app.state.metrics)
     return app

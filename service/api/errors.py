@@ -115,7 +115,7 @@ async def handle_validation_error(request: Request, exc: RequestValidationError)
 
 
 class CatchAllMiddleware:
-    """Renders errors raised outside the routes, and turns anything unexpected into a 503.
+    """Turns any exception no handler rendered into a logged 503.
 
     Starlette's own catch-all (``ServerErrorMiddleware``) answers 500 and re-raises;
     this sits inside it so no exception ever reaches it while a response can still be sent.
@@ -141,15 +141,9 @@ class CatchAllMiddleware:
         except Exception as exc:
             if started:
                 raise
-            await error_response(_as_api_error(exc, scope), self.metrics)(scope, receive, send)
-
-
-def _as_api_error(exc: Exception, scope: Scope) -> ApiError:
-    """``exc`` itself when it is an :class:`ApiError`; else log it and make it a 503."""
-    if isinstance(exc, ApiError):
-        return exc
-    log.exception("unexpected error in %s %s", scope["method"], scope["path"])
-    return Unavailable(
-        f"the scheduler failed unexpectedly ({type(exc).__name__}); the error was logged, "
-        "retry later or report it"
-    )
+            log.exception("unexpected error in %s %s", scope["method"], scope["path"])
+            failure = Unavailable(
+                f"the scheduler failed unexpectedly ({type(exc).__name__}); the error was "
+                "logged, retry later or report it"
+            )
+            await error_response(failure, self.metrics)(scope, receive, send)

@@ -53,7 +53,7 @@ class Metrics:
         )
         self.problem_size = Histogram(
             "scheduler_problem_size",
-            "Robots and conflicts of accepted problems.",
+            "Robots and conflicts of problems within the caps.",
             ("dimension",),
             buckets=SIZE_BUCKETS,
             registry=self.registry,

@@ -5,6 +5,7 @@ from __future__ import annotations
 from anyio import to_thread
 from fastapi import APIRouter
 
+from service.api.body_limit import BodyLimitRoute
 from service.api.deps import MetricsDep, RuntimeDep, SettingsDep
 from service.api.errors import ProblemInvalid, TooLarge
 from service.core.problem import ProblemError
@@ -14,7 +15,7 @@ from service.solvers.dispatch import dispatch
 
 __all__ = ["router"]
 
-router = APIRouter(prefix="/v1", tags=["schedules"])
+router = APIRouter(prefix="/v1", tags=["schedules"], route_class=BodyLimitRoute)
 
 ERROR_RESPONSES = {
     413: {"description": "The body, or its robots, nodes or conflicts, exceed a cap."},
