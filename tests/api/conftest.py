@@ -15,6 +15,7 @@ from typing import Any
 
 import httpx
 import pytest
+from fastapi import FastAPI
 
 from service.main import create_app
 from service.settings import Settings, get_settings
@@ -37,15 +38,16 @@ def tiny() -> dict[str, Any]:
 
 @asynccontextmanager
 async def _serve(
-    settings: Settings | None = None, ready: bool = True
+    settings: Settings | None = None, ready: bool = True, app: FastAPI | None = None
 ) -> AsyncIterator[httpx.AsyncClient]:
-    """A new app (own metrics), its lifespan running, and a client for it.
+    """An app (by default a new one, with its own metrics), its lifespan running, and a client.
 
     Args:
         settings: replaces :func:`get_settings` through a dependency override.
         ready: wait for ``/readyz`` before yielding.
+        app: serve this app (to inspect its state) instead of a new one.
     """
-    app = create_app()
+    app = app or create_app()
     if settings is not None:
         app.dependency_overrides[get_settings] = lambda: settings
     transport = httpx.ASGITransport(app=app)

@@ -1,0 +1,170 @@
+"""Probes: liveness always, readiness only after warm-up; both answer during long solves."""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import anyio
+import httpx
+import pytest
+from anyio import to_thread
+
+from service.api import runtime as runtime_module
+from service.main import create_app
+from service.settings import Settings
+from service.solvers import dispatch as dispatch_module
+from service.solvers.registry import SolveContext, SolverOutput
+
+from .conftest import Serve
+from .helpers import post_json, wait_ready
+
+pytestmark = pytest.mark.anyio
+
+# Generous bound on every wait; reached only when the behaviour under test is broken.
+WAIT_S = 30.0
+
+
+async def poll_readiness(
+    client: httpx.AsyncClient, until: Callable[[dict], bool]
+) -> httpx.Response:
+    """Poll ``/readyz`` until its body satisfies ``until`` (bounded)."""
+    with anyio.fail_after(WAIT_S):
+        while not until((response := await client.get("/readyz")).json()):
+            await anyio.sleep(0.01)
+    return response
+
+
+async def test_live_and_ready(client: httpx.AsyncClient) -> None:
+    assert (await client.get("/healthz")).json() == {"status": "ok"}
+    response = await client.get("/readyz")
+    assert response.status_code == 200
+    body = response.json()
+    assert body["ready"] is True
+    assert {"exact", "fcfs"} <= set(body["solvers"])
+    assert body["models"] == {}
+
+
+async def test_not_ready_until_warm_up_finishes(
+    serve: Serve, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    release = threading.Event()
+    real_dispatch = runtime_module.dispatch
+
+    def slow_dispatch(*args: Any) -> Any:
+        release.wait(WAIT_S)
+        return real_dispatch(*args)
+
+    monkeypatch.setattr(runtime_module, "dispatch", slow_dispatch)
+    async with serve(ready=False) as client:
+        try:
+            assert (await client.get("/healthz")).status_code == 200
+            response = await client.get("/readyz")
+            assert response.status_code == 503
+            assert response.json()["detail"] == "warming up"
+        finally:
+            release.set()
+        assert (await wait_ready(client)).json()["ready"] is True
+
+
+async def test_failed_warm_up_stays_live_but_not_ready(
+    serve: Serve, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    def failing_dispatch(*args: Any) -> Any:
+        raise RuntimeError("no CP-SAT today")
+
+    monkeypatch.setattr(runtime_module, "dispatch", failing_dispatch)
+    async with serve(ready=False) as client:
+        response = await poll_readiness(client, lambda b: b["detail"] != "warming up")
+        assert response.status_code == 503
+        assert response.json()["detail"] == "warm-up failed: RuntimeError: no CP-SAT today"
+        assert (await client.get("/healthz")).status_code == 200
+
+
+async def test_not_ready_when_large_solver_is_not_registered(serve: Serve) -> None:
+    async with serve(Settings(large_solver="nope"), ready=False) as client:
+        response = await poll_readiness(client, lambda b: b["detail"] != "warming up")
+    assert response.status_code == 503
+    assert response.json()["detail"] == "solvers not registered: nope"
+
+
+class BlockingSolver:
+    """Stands in for ``exact``: blocks until released, then answers with FCFS."""
+
+    def __init__(self) -> None:
+        self.entered = 0
+        self.started = threading.Event()
+        self.release = threading.Event()
+        self.timed_out = threading.Event()
+        self._fcfs = dispatch_module.get_solver("fcfs")
+
+    def __call__(self, ctx: SolveContext) -> SolverOutput | None:
+        self.entered += 1
+        self.started.set()
+        if not self.release.wait(WAIT_S):
+            self.timed_out.set()
+        return self._fcfs(ctx)
+
+    def install(self, monkeypatch: pytest.MonkeyPatch) -> None:
+        real = dispatch_module.get_solver
+        monkeypatch.setattr(
+            dispatch_module, "get_solver", lambda name: self if name == "exact" else real(name)
+        )
+
+
+@pytest.fixture
+def blocking(monkeypatch: pytest.MonkeyPatch) -> Iterator[BlockingSolver]:
+    solver = BlockingSolver()
+    solver.install(monkeypatch)
+    yield solver
+    solver.release.set()
+
+
+async def test_probes_answer_during_a_long_solve(
+    client: httpx.AsyncClient, blocking: BlockingSolver, tiny: dict
+) -> None:
+    responses: list[httpx.Response] = []
+    async with anyio.create_task_group() as tasks:
+
+        async def solve() -> None:
+            responses.append(await post_json(client, tiny))
+
+        tasks.start_soon(solve)
+        try:
+            assert await to_thread.run_sync(blocking.started.wait, WAIT_S)
+            assert (await client.get("/healthz")).status_code == 200
+            assert (await client.get("/readyz")).status_code == 200
+            # Had the solve blocked the event loop, the probes would only have been
+            # answered after the solver gave up waiting.
+            assert not blocking.timed_out.is_set()
+        finally:
+            blocking.release.set()
+    assert responses[0].status_code == 200
+
+
+async def test_solves_beyond_solve_concurrency_wait(
+    serve: Serve, monkeypatch: pytest.MonkeyPatch, tiny: dict
+) -> None:
+    app = create_app()
+    async with serve(Settings(solve_concurrency=1), app=app) as client:
+        blocking = BlockingSolver()
+        blocking.install(monkeypatch)
+        limiter = app.state.runtime.limiter
+        responses: list[httpx.Response] = []
+        async with anyio.create_task_group() as tasks:
+
+            async def solve() -> None:
+                responses.append(await post_json(client, tiny))
+
+            tasks.start_soon(solve)
+            tasks.start_soon(solve)
+            try:
+                with anyio.fail_after(WAIT_S):
+                    while limiter.statistics().tasks_waiting < 1:
+                        await anyio.sleep(0.01)
+                assert blocking.entered == 1 and limiter.borrowed_tokens == 1
+            finally:
+                blocking.release.set()
+    assert [r.status_code for r in responses] == [200, 200]
+    assert blocking.entered == 2
