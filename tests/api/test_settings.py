@@ -1,0 +1,58 @@
+"""Settings: environment variables, validation, and the dispatch policy built from them."""
+
+from __future__ import annotations
+
+import pytest
+from pydantic import ValidationError
+
+from service.settings import MIB, Settings, get_settings
+from service.solvers.dispatch import DispatchPolicy
+
+
+def test_defaults() -> None:
+    s = Settings()
+    assert (s.host, s.port, s.log_level) == ("127.0.0.1", 8000, "info")
+    assert (s.max_robots, s.max_nodes, s.max_conflicts) == (5000, 100_000, 200_000)
+    assert s.max_body_bytes == 50 * MIB
+    assert (s.exact_workers, s.solve_concurrency) == (1, 2)
+
+
+def test_environment_overrides(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("SCHEDULER_PORT", "9001")
+    monkeypatch.setenv("SCHEDULER_LOG_LEVEL", "DEBUG")
+    monkeypatch.setenv("SCHEDULER_EXACT_MAX_ROBOTS", "12")
+    s = Settings()
+    assert (s.port, s.log_level, s.exact_max_robots) == (9001, "debug", 12)
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [
+        ("port", 0),
+        ("port", 70000),
+        ("default_time_limit_s", 0.0),
+        ("default_time_limit_s", 301.0),
+        ("max_robots", 0),
+        ("max_body_bytes", 0),
+        ("exact_workers", 0),
+        ("solve_concurrency", 0),
+        ("large_solver", "auto"),
+        ("log_level", "loud"),
+    ],
+)
+def test_invalid_values_are_refused(field: str, value: object) -> None:
+    with pytest.raises(ValidationError, match=field):
+        Settings(**{field: value})
+
+
+def test_dispatch_policy_follows_settings() -> None:
+    s = Settings(
+        default_time_limit_s=2.5, exact_max_robots=10, large_solver="fcfs", exact_workers=4
+    )
+    assert s.dispatch_policy() == DispatchPolicy(
+        default_time_limit_s=2.5, exact_max_robots=10, large_solver="fcfs", exact_workers=4
+    )
+
+
+def test_get_settings_is_cached() -> None:
+    assert get_settings() is get_settings()
