@@ -30,7 +30,7 @@ LogLevel = Literal["critical", "error", "warning", "info", "debug"]
 class Settings(BaseSettings):
     """Everything an operator may tune, with the defaults the service ships with."""
 
-    model_config = SettingsConfigDict(env_prefix="SCHEDULER_", extra="ignore")
+    model_config = SettingsConfigDict(env_prefix="SCHEDULER_")
 
     host: str = "127.0.0.1"
     port: int = Field(default=8000, ge=1, le=65535)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import time
 from dataclasses import dataclass
 
 from anyio import CapacityLimiter
@@ -60,6 +61,7 @@ def warm_up(runtime: Runtime) -> None:
         runtime.detail = f"solvers not registered: {', '.join(missing)}"
         log.error("not ready: %s", runtime.detail)
         return
+    start = time.perf_counter()
     try:
         dispatch(WARMUP_REQUEST, runtime.policy)
     except Exception as exc:
@@ -67,3 +69,4 @@ def warm_up(runtime: Runtime) -> None:
         log.exception("not ready: warm-up failed")
         return
     runtime.ready, runtime.detail = True, "ready"
+    log.info("ready: warm-up took %.2f s", time.perf_counter() - start)

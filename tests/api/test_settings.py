@@ -56,3 +56,8 @@ def test_dispatch_policy_follows_settings() -> None:
 
 def test_get_settings_is_cached() -> None:
     assert get_settings() is get_settings()
+
+
+def test_misspelled_setting_is_refused() -> None:
+    with pytest.raises(ValidationError, match="max_robot"):
+        Settings(max_robot=2)

@@ -14,10 +14,14 @@ router = APIRouter(tags=["health"])
 
 
 class Liveness(BaseModel):
+    """The process is up."""
+
     status: str = "ok"
 
 
 class Readiness(BaseModel):
+    """Whether the service takes traffic, why not if not, and what it can solve with."""
+
     ready: bool
     detail: str
     solvers: list[str]

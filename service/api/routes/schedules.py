@@ -49,15 +49,11 @@ async def create_schedule(
 
 def check_caps(request: ScheduleRequest, settings: Settings) -> None:
     """Refuse (413) a problem with more robots, nodes or conflicts than the settings allow."""
-    sizes = {
-        "robots": len(request.robots),
-        "nodes": sum(len(r.nodes) for r in request.robots),
-        "conflicts": len(request.conflicts),
+    caps = {
+        "robots": (len(request.robots), settings.max_robots),
+        "nodes": (sum(len(r.nodes) for r in request.robots), settings.max_nodes),
+        "conflicts": (len(request.conflicts), settings.max_conflicts),
     }
-    over = [
-        f"{count} {what} exceed max_{what} ({getattr(settings, f'max_{what}')})"
-        for what, count in sizes.items()
-        if count > getattr(settings, f"max_{what}")
-    ]
+    over = [f"{n} {what} exceed max_{what} ({cap})" for what, (n, cap) in caps.items() if n > cap]
     if over:
         raise TooLarge("problem too large: " + "; ".join(over))
