@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
+from importlib.metadata import version
 
 import anyio
 from anyio import CapacityLimiter, to_thread
@@ -43,7 +44,7 @@ def create_app() -> FastAPI:
     """A new app with its own metrics registry; settings are read when it starts."""
     app = FastAPI(
         title="Coordination scheduler",
-        version="1",
+        version=version("coordination-scheduler"),
         summary="Deadlock-free, density-feasible schedules for multi-robot coordination.",
         lifespan=lifespan,
     )

@@ -17,7 +17,7 @@ SettingsDep = Annotated[Settings, Depends(get_settings)]
 
 
 def resolve_settings(app: FastAPI) -> Settings:
-    """The settings in force outside a route (lifespan, middleware), honouring test overrides."""
+    """The settings in force outside a dependency (lifespan, body cap), honouring overrides."""
     return app.dependency_overrides.get(get_settings, get_settings)()
 
 

@@ -5,7 +5,7 @@ the rejected-requests metric)::
 
     ApiError
     ├── InvalidRequest   422  the body fails the schema, or is not JSON       (validation)
-    ├── ProblemInvalid   422  well-typed, but breaks a cross-field rule       (problem_rule)
+    ├── InvalidProblem   422  well-typed, but breaks a cross-field rule       (problem_rule)
     ├── TooLarge         413  body bytes, robots, nodes or conflicts over cap (too_large)
     └── Unavailable      503  anything unexpected; logged, never a 500        (internal)
 
@@ -31,7 +31,7 @@ __all__ = [
     "ApiError",
     "CatchAllMiddleware",
     "InvalidRequest",
-    "ProblemInvalid",
+    "InvalidProblem",
     "TooLarge",
     "Unavailable",
     "error_response",
@@ -73,14 +73,15 @@ class InvalidRequest(ApiError):
         return cls(items)
 
 
-class ProblemInvalid(ApiError):
+class InvalidProblem(ApiError):
     """The request is well-typed but breaks a rule spanning several fields."""
 
     status_code = 422
     reason = "problem_rule"
 
     @classmethod
-    def from_problem_error(cls, exc: ProblemError) -> ProblemInvalid:
+    def from_problem_error(cls, exc: ProblemError) -> InvalidProblem:
+        """The core's violations, each as ``{"loc", "msg", "type"}``."""
         return cls([e.as_dict() for e in exc.errors])
 
 

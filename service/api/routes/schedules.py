@@ -7,7 +7,7 @@ from fastapi import APIRouter
 
 from service.api.body_limit import BodyLimitRoute
 from service.api.deps import MetricsDep, RuntimeDep, SettingsDep
-from service.api.errors import ProblemInvalid, TooLarge
+from service.api.errors import InvalidProblem, TooLarge
 from service.core.problem import ProblemError
 from service.core.schemas import ScheduleRequest, ScheduleResponse
 from service.settings import Settings
@@ -42,7 +42,7 @@ async def create_schedule(
     try:
         response = await to_thread.run_sync(dispatch, body, runtime.policy, limiter=runtime.limiter)
     except ProblemError as exc:
-        raise ProblemInvalid.from_problem_error(exc) from exc
+        raise InvalidProblem.from_problem_error(exc) from exc
     metrics.observe_solve(response)
     return response
 
