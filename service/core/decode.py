@@ -79,7 +79,7 @@ class Decoder:
     def ranks(self, bids: np.ndarray) -> np.ndarray:
         """Chain sums of bids. Shapes: bids (S, V) positive -> ranks (S, V)."""
         bids = np.atleast_2d(np.asarray(bids, dtype=np.float64))
-        if np.any(~(bids > 0)):
+        if not np.all(np.isfinite(bids) & (bids > 0)):
             raise ValueError("bids must be positive and finite")
         n_samples = bids.shape[0]
         padded = np.zeros((n_samples, self.problem.n_robots * self._chain_width))

@@ -117,8 +117,42 @@ def _longest_paths(
                 if indeg[n] == 0:
                     queue[tail] = n
                     tail += 1
-        converged[s] = tail == n_events
+        if tail < n_events:  # a cycle: least times exist only if no cycle forces a wait
+            converged[s] = _relax_cyclic(chain_next, target, source[s], offset[s], active[s], d)
     return converged
+
+
+@numba.njit(cache=True, nogil=True)
+def _relax_cyclic(
+    chain_next: np.ndarray,  # (E,)
+    target: np.ndarray,  # (2M,)
+    source: np.ndarray,  # (2M,) of one sample
+    offset: np.ndarray,  # (2M,)
+    active: np.ndarray,  # (2M,)
+    d: np.ndarray,  # (E+1,) lower bounds on entry, least delays on exit if they exist
+) -> bool:
+    """Bellman-Ford sweeps for a cyclic constraint graph: True if a fixpoint is reached.
+
+    Only invalid (node-cyclic) assignments get here; it reports their least
+    times when every cycle is wait-free, as the contract defines them.
+    """
+    n_events = chain_next.size
+    for _ in range(n_events + 1):
+        changed = False
+        for j in range(target.size):
+            if active[j]:
+                value = d[source[j]] + offset[j]
+                if value > d[target[j]]:
+                    d[target[j]] = value
+                    changed = True
+        for e in range(n_events):
+            nxt = chain_next[e]
+            if nxt >= 0 and d[e] > d[nxt]:
+                d[nxt] = d[e]
+                changed = True
+        if not changed:
+            return True
+    return False
 
 
 class Evaluator:
