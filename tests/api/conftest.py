@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import copy
 import json
-from collections.abc import AsyncIterator, Callable
-from contextlib import AbstractAsyncContextManager, asynccontextmanager
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
 from typing import Any
 
 import httpx
@@ -20,9 +20,7 @@ from fastapi import FastAPI
 from service.main import create_app
 from service.settings import Settings, get_settings
 
-from .helpers import TINY, wait_ready
-
-Serve = Callable[..., AbstractAsyncContextManager[httpx.AsyncClient]]
+from .helpers import TINY, Serve, wait_ready
 
 
 @pytest.fixture

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 from collections import Counter
+from collections.abc import Callable
+from contextlib import AbstractAsyncContextManager
 from pathlib import Path
 from typing import Any
 
@@ -21,6 +23,9 @@ from service.core.schemas import ScheduleRequest
 
 TINY = Path(__file__).parents[2] / "schemas" / "examples" / "tiny.json"
 READY_TIMEOUT_S = 60.0
+
+# The ``serve`` fixture: ``async with serve(settings, ready=..., app=...) as client``.
+Serve = Callable[..., AbstractAsyncContextManager[httpx.AsyncClient]]
 
 
 async def wait_ready(client: httpx.AsyncClient) -> httpx.Response:

@@ -15,8 +15,7 @@ from service.settings import Settings
 from service.solvers import dispatch as dispatch_module
 from service.solvers.registry import SolveContext, SolverOutput
 
-from .conftest import Serve
-from .helpers import TINY, post_json
+from .helpers import TINY, Serve, post_json
 
 pytestmark = pytest.mark.anyio
 

@@ -17,8 +17,7 @@ from service.settings import Settings
 from service.solvers import dispatch as dispatch_module
 from service.solvers.registry import SolveContext, SolverOutput
 
-from .conftest import Serve
-from .helpers import post_json, wait_ready
+from .helpers import Serve, post_json, wait_ready
 
 pytestmark = pytest.mark.anyio
 

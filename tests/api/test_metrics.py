@@ -13,8 +13,7 @@ from service.api.middleware import PROBE_ROUTES
 from service.settings import Settings
 from service.solvers import dispatch as dispatch_module
 
-from .conftest import Serve
-from .helpers import post_json
+from .helpers import Serve, post_json
 
 pytestmark = pytest.mark.anyio
 
