@@ -33,7 +33,11 @@ __all__ = ["app", "create_app", "lifespan"]
 async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     """Build the runtime, then warm up in the background: live at once, ready after warm-up."""
     settings = resolve_settings(app)
-    runtime = Runtime(settings.dispatch_policy(), CapacityLimiter(settings.solve_concurrency))
+    runtime = Runtime(
+        settings.dispatch_policy(),
+        CapacityLimiter(settings.solve_concurrency),
+        model_store=settings.model_store,
+    )
     app.state.runtime = runtime
     async with anyio.create_task_group() as tasks:
         tasks.start_soon(to_thread.run_sync, warm_up, runtime)

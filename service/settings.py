@@ -11,6 +11,7 @@ read once); tests replace them with ``app.dependency_overrides[get_settings]``.
 from __future__ import annotations
 
 from functools import lru_cache
+from pathlib import Path
 from typing import Literal
 
 from pydantic import Field, field_validator
@@ -23,6 +24,9 @@ __all__ = ["MIB", "Settings", "get_settings"]
 MIB = 1024 * 1024
 # The largest options.time_limit_s a request may ask (service.core.schemas.OptionsIn).
 MAX_TIME_LIMIT_S = 300.0
+
+# The model store shipped in the repository (the Dockerfile copies it to the same place).
+DEFAULT_MODEL_STORE = Path(__file__).resolve().parents[1] / "model_store"
 
 LogLevel = Literal["critical", "error", "warning", "info", "debug"]
 
@@ -44,7 +48,10 @@ class Settings(BaseSettings):
     max_body_bytes: int = Field(default=50 * MIB, ge=1)
     # Routing of solver "auto": exact up to this many robots, large_solver above.
     exact_max_robots: int = Field(default=30, ge=0)
-    large_solver: str = "exact"
+    large_solver: str = "gnn_vae"
+    # Where the learned models live (manifest.json + <objective>/<version>/); a missing
+    # or corrupt model degrades its objective to the exact solver, then FCFS.
+    model_store: Path = DEFAULT_MODEL_STORE
     # CP-SAT workers per solve, and how many solves run at once in worker threads;
     # their product should not exceed the machine's cores.
     exact_workers: int = Field(default=1, ge=1)

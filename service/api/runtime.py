@@ -4,15 +4,16 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
+from pathlib import Path
 
 from anyio import CapacityLimiter
 
-from service.core.schemas import ScheduleRequest
+from service.core.schemas import OBJECTIVES, OptionsIn, ScheduleRequest
 from service.solvers.dispatch import LAST_RESORT, DispatchPolicy, dispatch
 from service.solvers.registry import solver_names
 
-__all__ = ["WARMUP_REQUEST", "Runtime", "missing_solvers", "warm_up"]
+__all__ = ["WARMUP_REQUEST", "Runtime", "load_models", "missing_solvers", "warm_up"]
 
 log = logging.getLogger(__name__)
 
@@ -30,14 +31,19 @@ WARMUP_REQUEST = ScheduleRequest.model_validate(
 )
 
 
+WARMUP_GNN_OPTIONS = OptionsIn(solver="gnn_vae", samples=2)
+
+
 @dataclass(eq=False)
 class Runtime:
     """Per-app state built by the lifespan; ``ready`` turns true once warm-up succeeded."""
 
     policy: DispatchPolicy
     limiter: CapacityLimiter
+    model_store: Path | None = None
     ready: bool = False
     detail: str = "warming up"
+    model_errors: dict[str, str] = field(default_factory=dict)
 
     @property
     def models(self) -> dict[str, str]:
@@ -51,6 +57,21 @@ def missing_solvers(policy: DispatchPolicy) -> list[str]:
     return sorted(set(needed) - set(solver_names()))
 
 
+def load_models(runtime: Runtime, store: Path) -> None:
+    """Load every objective's default GNN-VAE into the runtime's policy.
+
+    An objective whose model is missing or corrupt is logged and listed in
+    ``runtime.model_errors``; requests for it degrade to the exact solver.
+    """
+    from service.learning.store import load_all  # torch is imported only here
+
+    models, errors = load_all(store, OBJECTIVES)
+    runtime.policy = replace(runtime.policy, models=models)
+    runtime.model_errors = errors
+    for objective, error in errors.items():
+        log.warning("no GNN-VAE for %s (exact solver serves it): %s", objective, error)
+
+
 def warm_up(runtime: Runtime) -> None:
     """Solve :data:`WARMUP_REQUEST` once (blocking), then mark ``runtime`` ready.
 
@@ -62,8 +83,14 @@ def warm_up(runtime: Runtime) -> None:
         log.error("not ready: %s", runtime.detail)
         return
     start = time.perf_counter()
+    if runtime.model_store is not None:
+        load_models(runtime, runtime.model_store)
     try:
         dispatch(WARMUP_REQUEST, runtime.policy)
+        if runtime.policy.models:  # compile the learned model's path too
+            dispatch(
+                WARMUP_REQUEST.model_copy(update={"options": WARMUP_GNN_OPTIONS}), runtime.policy
+            )
     except Exception as exc:
         runtime.detail = f"warm-up failed: {type(exc).__name__}: {exc}"
         log.exception("not ready: warm-up failed")

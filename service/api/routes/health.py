@@ -26,6 +26,7 @@ class Readiness(BaseModel):
     detail: str
     solvers: list[str]
     models: dict[str, str]
+    model_errors: dict[str, str]
 
 
 @router.get("/healthz")
@@ -44,4 +45,5 @@ async def readyz(runtime: RuntimeDep, response: Response) -> Readiness:
         detail=runtime.detail,
         solvers=list(solver_names()),
         models=runtime.models,
+        model_errors=runtime.model_errors,
     )
