@@ -62,9 +62,11 @@ class Prepared:
 
 
 def delay_ratio(opt: float, cost: float, free: float) -> float:
-    """(opt - free) / (cost - free), 1 when the method reaches the optimum."""
+    """(opt - free) / (cost - free), 1 at the optimum; NaN where free is no lower bound."""
     if cost <= opt + 1e-9 * max(1.0, abs(opt)):
         return 1.0
+    if cost <= free:  # sync_completion is not monotone: zero delay need not be a bound
+        return float("nan")
     return (opt - free) / (cost - free)
 
 
@@ -207,7 +209,7 @@ def summarize_small(rows: list[dict[str, Any]]) -> list[str]:
                 cells.append(f"gap {np.mean([r[m] - r['opt'] for r in sel]):9.4f}")
             else:
                 ratio = np.mean([_ratio(r["opt"], r[m]) for r in sel])
-                dr = np.mean([delay_ratio(r["opt"], r[m], r["free"]) for r in sel])
+                dr = np.nanmean([delay_ratio(r["opt"], r[m], r["free"]) for r in sel])
                 cells.append(f"{ratio:.4f} / {dr:.3f}")
         ms = 1e3 * np.mean([r["gnn100_s"] for r in sel])
         out.append(
@@ -241,12 +243,12 @@ def summarize_large(rows: list[dict[str, Any]]) -> list[str]:
             out.append(
                 f"{n:6d} {d:8} {np.mean([r['conflicts'] for r in sel]):6.0f} "
                 f"{np.mean([_ratio(r['best'], r['gnn']) for r in sel]):9.4f} "
-                f"{np.mean([delay_ratio(r['best'], r['gnn'], r['free']) for r in sel]):7.3f} "
+                f"{np.nanmean([delay_ratio(r['best'], r['gnn'], r['free']) for r in sel]):7.3f} "
                 f"{np.mean([r['gnn_s'] for r in sel]):7.3f} "
                 f"{np.mean([_ratio(r['best'], r['exact']) for r in sel]):11.4f} "
                 f"{np.mean([r['exact_s'] for r in sel]):8.2f} "
                 f"{sum(r['exact_optimal'] for r in sel):3d}/{len(sel):<2d} {reach_txt:>12} "
-                f"{np.mean([delay_ratio(r['best'], r['fcfs'], r['free']) for r in sel]):7.3f}"
+                f"{np.nanmean([delay_ratio(r['best'], r['fcfs'], r['free']) for r in sel]):7.3f}"
             )
     out.append(
         "ratios against the best cost either method found; exact->gnn s: CP-SAT time to "
@@ -269,7 +271,7 @@ def plot_large(rows: list[dict[str, Any]], path: Path) -> None:
             sel = [[r for r in rows if r["robots"] == n and r["density"] == d] for n in sizes]
             axes[0].plot(
                 sizes,
-                [np.mean([delay_ratio(r["best"], r[method], r["free"]) for r in s]) for s in sel],
+                [np.nanmean([delay_ratio(r["best"], r[method], r["free"]) for r in s]) for s in sel],
                 style,
                 label=f"{method} {d}",
             )
