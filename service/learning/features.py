@@ -1,25 +1,30 @@
 """Graph tensors of a problem for the GNN-VAE (feature layout documented here).
 
-Times are normalized per graph, t_n = (t - t_min) / span with span the
-graph's time span, so a model trained on one time scale serves any other.
+Every feature is a *relative* time divided by the graph's time unit (the
+median node duration), clipped to [-CLIP, CLIP]: no absolute clock position
+and no dependence on the graph's overall span. So a model trained on small
+problems in seconds serves problems in hours and problems of 250 robots whose
+span is many times larger (with span-normalized features the first model
+generalized poorly to stitched problems: its delay ratio there was ~0.6).
 
 Graph: one vertex per node. Directed edges: precedence v -> v+1 along every
 robot's path, then for conflict c the two arcs a -> b (index 2c of the conflict
 block) and b -> a (index 2c+1).
 
-Node features (NODE_DIM = 10), per node v of robot r:
-  0 enter_n, 1 exit_n, 2 (exit - enter) / span, 3 robot's free completion T_r(C)_n,
-  4 (T_r(C) - exit) / span (travel left after v), 5 1 / density,
-  6 density >= 2, 7 first node of its robot, 8 last node of its robot,
-  9 conflicts at v / 8 (degree, clipped to 1).
-Edge features (EDGE_DIM = 9), for an arc u -> v:
+Node features (NODE_DIM = 10), per node v of robot r, in units:
+  0 duration, 1 log1p(travel before v on its path: enter - T_r(1)),
+  2 log1p(travel left after v: T_r(C) - exit), 3 gap from the previous node
+  (0 if first), 4 gap to the next node (0 if last), 5 1 / density,
+  6 density >= 2, 7 first node, 8 last node, 9 conflicts at v / 8 (clipped to 1).
+Edge features (EDGE_DIM = 10), for an arc u -> v, in units:
   0 precedence arc, 1 conflict arc,
-  2 pair enter_n of v's side, 3 pair exit_n of v's side,
-  4 pair enter_n of u's side, 5 pair exit_n of u's side
-    (precedence arcs: 2 = gap (enter_v - exit_u) / span, 3-5 zero),
-  6 following-type forbidden (inside a zero-budget clique),
-  7 assignment: +1 if u passes first, -1 if v does (0 on the skeleton graph),
-  8 assignment: 1 if following-type (0 on the skeleton graph).
+  2 pe_v - pe_u (> 0: u's side arrives first), 3 px_u - pe_v (v's wait if u goes
+  first, exclusive), 4 px_v - pe_u (u's wait if v goes first), 5 pe_v - enter_v
+  and 6 pe_u - enter_u (where the pair section starts inside each node),
+  (precedence arcs: 2 = gap between the nodes, 3-6 zero),
+  7 following-type forbidden (inside a zero-budget clique),
+  8 assignment: +1 if u passes first, -1 if v does (0 on the skeleton graph),
+  9 assignment: 1 if following-type (0 on the skeleton graph).
 """
 
 from __future__ import annotations
@@ -36,8 +41,9 @@ from service.core.problem import Problem
 __all__ = ["EDGE_DIM", "NODE_DIM", "GraphTensors", "assignment_edge_features", "graph_tensors"]
 
 NODE_DIM = 10
-EDGE_DIM = 9
-ASSIGN_COLS = slice(7, 9)
+EDGE_DIM = 10
+ASSIGN_COLS = slice(8, 10)
+CLIP = 10.0  # relative times beyond 10 time units carry no extra information
 
 
 @dataclass(frozen=True)
@@ -56,28 +62,31 @@ class GraphTensors:
     n_precedence: int
 
 
-def graph_tensors(problem: Problem, cliques: Cliques) -> GraphTensors:
-    """Features and arcs of ``problem``'s skeleton graph (assignment columns zero)."""
-    t = problem.tp_time
-    t0 = float(t.min())
-    span = max(float(t.max()) - t0, 1e-9)
+def _time_unit(problem: Problem) -> float:
+    """The graph's time unit: the median node duration (positive by the input rules)."""
+    return float(np.median(problem.node_exit - problem.node_enter))
 
-    def norm(v: np.ndarray) -> np.ndarray:
-        return (v - t0) / span
 
-    free = problem.free_time()[problem.node_robot]  # (V,)
+def _node_features(problem: Problem, unit: float) -> np.ndarray:
+    """(V, NODE_DIM) float32, see the module doc."""
     first = np.zeros(problem.n_nodes, dtype=bool)
     first[problem.robot_start[:-1]] = True
     last = np.zeros(problem.n_nodes, dtype=bool)
     last[problem.robot_start[1:] - 1] = True
+    start = problem.tp_time[problem.tp_start[:-1]][problem.node_robot]  # (V,) T_r(1)
+    free = problem.free_time()[problem.node_robot]  # (V,) T_r(C)
+    gap_before = np.zeros(problem.n_nodes)
+    gap_before[~first] = (problem.node_enter[1:] - problem.node_exit[:-1])[~first[1:]]
+    gap_after = np.zeros(problem.n_nodes)
+    gap_after[~last] = gap_before[np.flatnonzero(~last) + 1]
     degree = np.bincount(problem.conf_nodes.ravel(), minlength=problem.n_nodes)
     x = np.stack(
         [
-            norm(problem.node_enter),
-            norm(problem.node_exit),
-            (problem.node_exit - problem.node_enter) / span,
-            norm(free),
-            (free - problem.node_exit) / span,
+            (problem.node_exit - problem.node_enter) / unit,
+            np.log1p((problem.node_enter - start) / unit),
+            np.log1p((free - problem.node_exit) / unit),
+            gap_before / unit,
+            gap_after / unit,
             1.0 / problem.node_density,
             problem.node_density >= 2,
             first,
@@ -85,31 +94,48 @@ def graph_tensors(problem: Problem, cliques: Cliques) -> GraphTensors:
             np.minimum(degree / 8.0, 1.0),
         ],
         axis=1,
-    ).astype(np.float32)
+    )
+    return np.clip(x, -CLIP, CLIP).astype(np.float32)
 
+
+def _conflict_features(problem: Problem, cliques: Cliques, unit: float) -> np.ndarray:
+    """(2M, EDGE_DIM) float32 for the arcs a -> b, b -> a of every conflict."""
+    pe, px = problem.pair_enter, problem.pair_exit  # (M, 2) sides a, b
+    node_enter = problem.node_enter[problem.conf_nodes]  # (M, 2)
+    # Arc 2c is a -> b (u = side a, v = side b); arc 2c+1 is b -> a.
+    pe_u, pe_v = pe.ravel(), pe[:, ::-1].ravel()
+    px_u, px_v = px.ravel(), px[:, ::-1].ravel()
+    en_u, en_v = node_enter.ravel(), node_enter[:, ::-1].ravel()
+    attr = np.zeros((pe_u.size, EDGE_DIM))
+    attr[:, 1] = 1.0
+    attr[:, 2] = (pe_v - pe_u) / unit
+    attr[:, 3] = (px_u - pe_v) / unit
+    attr[:, 4] = (px_v - pe_u) / unit
+    attr[:, 5] = (pe_v - en_v) / unit
+    attr[:, 6] = (pe_u - en_u) / unit
+    attr[:, 7] = np.repeat(cliques.forbidden(), 2)
+    return np.clip(attr, -CLIP, CLIP).astype(np.float32)
+
+
+def graph_tensors(problem: Problem, cliques: Cliques) -> GraphTensors:
+    """Features and arcs of ``problem``'s skeleton graph (assignment columns zero)."""
+    unit = _time_unit(problem)
+    last = np.zeros(problem.n_nodes, dtype=bool)
+    last[problem.robot_start[1:] - 1] = True
     prec = np.flatnonzero(~last)  # (Ep,) arcs v -> v+1
     prec_attr = np.zeros((prec.size, EDGE_DIM), dtype=np.float32)
     prec_attr[:, 0] = 1.0
-    prec_attr[:, 2] = (problem.node_enter[prec + 1] - problem.node_exit[prec]) / span
-
-    m = problem.n_conflicts
-    a, b = problem.conf_a, problem.conf_b
-    src = np.stack([a, b], axis=1).ravel()  # (2M,) a->b, b->a
-    dst = np.stack([b, a], axis=1).ravel()
-    pe, px = norm(problem.pair_enter), norm(problem.pair_exit)  # (M, 2) sides a, b
-    conf_attr = np.zeros((2 * m, EDGE_DIM), dtype=np.float32)
-    conf_attr[:, 1] = 1.0
-    conf_attr[:, 2] = pe[:, ::-1].ravel()  # v's side: b for a->b, a for b->a
-    conf_attr[:, 3] = px[:, ::-1].ravel()
-    conf_attr[:, 4] = pe.ravel()
-    conf_attr[:, 5] = px.ravel()
-    conf_attr[:, 6] = np.repeat(cliques.forbidden(), 2)
-
+    prec_attr[:, 2] = np.clip(
+        (problem.node_enter[prec + 1] - problem.node_exit[prec]) / unit, 0, CLIP
+    )
+    src = np.stack([problem.conf_a, problem.conf_b], axis=1).ravel()  # (2M,) a->b, b->a
+    dst = np.stack([problem.conf_b, problem.conf_a], axis=1).ravel()
     edge_index = np.concatenate([np.stack([prec, prec + 1]), np.stack([src, dst])], axis=1)
+    attr = np.concatenate([prec_attr, _conflict_features(problem, cliques, unit)])
     return GraphTensors(
-        x=torch.from_numpy(x),
+        x=torch.from_numpy(_node_features(problem, unit)),
         edge_index=torch.from_numpy(edge_index.astype(np.int64)),
-        edge_attr=torch.from_numpy(np.concatenate([prec_attr, conf_attr])),
+        edge_attr=torch.from_numpy(attr),
         robot_of_node=torch.from_numpy(problem.node_robot.astype(np.int64)),
         conf=torch.from_numpy(problem.conf_nodes.astype(np.int64)),
         n_precedence=int(prec.size),
