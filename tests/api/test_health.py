@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import json
 import threading
 from collections.abc import Callable, Iterator
+from pathlib import Path
 from typing import Any
 
 import anyio
@@ -12,8 +14,9 @@ import pytest
 from anyio import to_thread
 
 from service.api import runtime as runtime_module
+from service.core.schemas import OBJECTIVES
 from service.main import create_app
-from service.settings import Settings
+from service.settings import DEFAULT_MODEL_STORE, Settings
 from service.solvers import dispatch as dispatch_module
 from service.solvers.registry import SolveContext, SolverOutput
 
@@ -41,8 +44,25 @@ async def test_live_and_ready(client: httpx.AsyncClient) -> None:
     assert response.status_code == 200
     body = response.json()
     assert body["ready"] is True
-    assert {"exact", "fcfs"} <= set(body["solvers"])
-    assert body["models"] == {}
+    assert {"exact", "fcfs", "gnn_vae"} <= set(body["solvers"])
+    shipped = json.loads((DEFAULT_MODEL_STORE / "manifest.json").read_text())["default"]
+    assert body["models"] == {o: f"gnn_vae/{o}/{v}" for o, v in shipped.items()}
+    assert body["model_errors"] == {}
+
+
+async def test_missing_models_degrade_but_stay_ready(
+    serve: Serve, tiny: dict[str, Any], tmp_path: Path
+) -> None:
+    (tmp_path / "manifest.json").write_text('{"default": {"avg_completion": "v9"}}')
+    async with serve(Settings(model_store=tmp_path)) as client:
+        body = (await client.get("/readyz")).json()
+        assert body["ready"] is True and body["models"] == {}
+        assert set(body["model_errors"]) == set(OBJECTIVES)
+        tiny["options"]["solver"] = "gnn_vae"
+        answer = (await post_json(client, tiny)).json()
+        assert answer["solver"]["name"] == "exact"
+        assert answer["solver"]["fallback_from"] == "gnn_vae"
+        assert answer["checks"] == {"acyclic": True, "density": True}
 
 
 async def test_not_ready_until_warm_up_finishes(

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import httpx
@@ -37,9 +38,10 @@ def value(samples: Samples, name: str, **labels: str) -> float:
 
 
 async def test_metrics_count_requests_solves_sizes_and_rejections(
-    serve: Serve, monkeypatch: pytest.MonkeyPatch, tiny: dict[str, Any]
+    serve: Serve, monkeypatch: pytest.MonkeyPatch, tiny: dict[str, Any], tmp_path: Path
 ) -> None:
-    async with serve(Settings(max_robots=3, max_body_bytes=4000)) as client:
+    no_models = Settings(max_robots=3, max_body_bytes=4000, model_store=tmp_path)
+    async with serve(no_models) as client:
         assert (await post_json(client, tiny)).status_code == 200
         assert (await post_json(client, {**tiny, "objective": "fastest"})).status_code == 422
         bad_goal = {

@@ -36,8 +36,10 @@ async def test_every_solver_answers(
     assert_valid_answer(tiny, answer)
     if solver == "auto":
         assert answer["solver"]["name"] == "exact"  # 3 robots: under exact_max_robots
-    elif solver == "gnn_vae":  # no model loaded: degrades to the exact solver
-        assert answer["solver"]["fallback_from"] == "gnn_vae"
+    elif solver == "gnn_vae":  # the shipped model answers
+        assert answer["solver"]["name"] == "gnn_vae"
+        assert answer["solver"]["model"].startswith(f"gnn_vae/{tiny['objective']}/")
+        assert answer["solver"]["samples"] == 100
     else:
         assert answer["solver"]["name"] == solver
 
