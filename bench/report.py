@@ -1,0 +1,199 @@
+"""Summaries, plain-text tables, raw-result files and the plot of a benchmark run."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import platform
+import subprocess
+from collections.abc import Iterable, Sequence
+from datetime import UTC, datetime
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = [
+    "PERCENTILES",
+    "format_table",
+    "machine_info",
+    "plot_solve_times",
+    "summarize_solves",
+    "write_csv",
+    "write_json",
+]
+
+# Percentiles reported for solve times. With few problems per group p95 interpolates
+# between the largest times (numpy's default, "linear"), so read it with the group size.
+PERCENTILES = (50, 95)
+# Versions worth recording next to the figures: the solver and the JIT dominate them.
+_PACKAGES = ("numpy", "numba", "ortools", "pydantic")
+
+
+def summarize_solves(runs: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """One row per (family, robots, conflicts per robot, objective), in first-seen order.
+
+    Each row: problems, mean conflicts, p50/p95/max solve seconds, and the
+    fractions of solves that found a solution and that proved it optimal.
+    """
+    groups: dict[tuple, list[dict[str, Any]]] = {}
+    for run in runs:
+        key = (run["family"], run["robots"], run["conflicts_per_robot"], run["objective"])
+        groups.setdefault(key, []).append(run)
+    rows = []
+    for (family, robots, density, objective), members in groups.items():
+        times = np.array([m["time_s"] for m in members])
+        p50, p95 = np.percentile(times, PERCENTILES)
+        rows.append(
+            {
+                "family": family,
+                "robots": robots,
+                "conflicts_per_robot": density,
+                "objective": objective,
+                "problems": len(members),
+                "conflicts_mean": float(np.mean([m["n_conflicts"] for m in members])),
+                "p50_s": float(p50),
+                "p95_s": float(p95),
+                "max_s": float(times.max()),
+                "found": float(np.mean([m["found"] for m in members])),
+                "optimal": float(np.mean([m["optimal"] for m in members])),
+            }
+        )
+    return rows
+
+
+def format_table(headers: Sequence[str], rows: Iterable[Sequence[Any]]) -> str:
+    """A plain-text table: first column left-aligned, the others right-aligned."""
+    cells = [[str(h) for h in headers], *[[str(c) for c in row] for row in rows]]
+    widths = [max(len(row[i]) for row in cells) for i in range(len(headers))]
+
+    def line(row: list[str]) -> str:
+        parts = [
+            cell.ljust(w) if i == 0 else cell.rjust(w)
+            for i, (cell, w) in enumerate(zip(row, widths, strict=True))
+        ]
+        return "  ".join(parts).rstrip()
+
+    rule = "  ".join("-" * w for w in widths)
+    return "\n".join([line(cells[0]), rule, *(line(r) for r in cells[1:])])
+
+
+def _cpu_model() -> str:
+    """The CPU model name from /proc/cpuinfo (Linux), else what platform knows."""
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as f:
+            for text in f:
+                if text.startswith("model name"):
+                    return text.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def _git_commit() -> str | None:
+    """The checked-out commit, if this runs inside a git work tree."""
+    try:
+        out = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"],
+            capture_output=True,
+            text=True,
+            check=True,
+            cwd=Path(__file__).resolve().parent,
+        )
+    except (OSError, subprocess.CalledProcessError):
+        return None
+    return out.stdout.strip() or None
+
+
+def machine_info() -> dict[str, Any]:
+    """Where and when the benchmark ran: CPU, core count, Python and key package versions."""
+    versions = {}
+    for name in _PACKAGES:
+        try:
+            versions[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            versions[name] = None
+    return {
+        "date": datetime.now(UTC).isoformat(timespec="seconds"),
+        "cpu": _cpu_model(),
+        "cpus": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count(),
+        "platform": platform.platform(),
+        "python": platform.python_version(),
+        "packages": versions,
+        "commit": _git_commit(),
+    }
+
+
+def write_json(path: Path, data: dict[str, Any]) -> None:
+    """Write ``data`` as indented JSON."""
+    path.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
+
+
+def write_csv(path: Path, rows: Sequence[dict[str, Any]]) -> None:
+    """Write dict rows as CSV with the first row's keys as the header."""
+    with open(path, "w", newline="", encoding="utf-8") as f:
+        if not rows:
+            return
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+def plot_solve_times(summary: Sequence[dict[str, Any]], time_limit_s: float, path: Path) -> None:
+    """Solve-time p50 and p95 against robot count, one panel per objective (log scale).
+
+    Small problems are one line per percentile; stitched problems one line per
+    percentile and conflict density. The time limit is drawn dashed.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    objectives = list(dict.fromkeys(row["objective"] for row in summary))
+    cols = 2 if len(objectives) > 1 else 1
+    nrows = (len(objectives) + cols - 1) // cols
+    fig, axes = plt.subplots(
+        nrows, cols, figsize=(6.0 * cols, 4.0 * nrows), squeeze=False, sharex=True, sharey=True
+    )
+    series: dict[tuple[str, float | None], str] = {("small", None): "small"}
+    for row in summary:
+        if row["family"] == "stitched":
+            series[("stitched", row["conflicts_per_robot"])] = (
+                f"stitched, {row['conflicts_per_robot']:g} conflicts/robot"
+            )
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for ax, objective in zip(axes.ravel(), objectives, strict=False):
+        for k, ((family, density), label) in enumerate(series.items()):
+            rows = [
+                r
+                for r in summary
+                if r["objective"] == objective
+                and r["family"] == family
+                and r["conflicts_per_robot"] == density
+            ]
+            if not rows:
+                continue
+            x = [r["robots"] for r in rows]
+            color = colors[k % len(colors)]
+            ax.plot(x, [r["p50_s"] for r in rows], "o-", color=color, label=f"{label} p50")
+            ax.plot(x, [r["p95_s"] for r in rows], "^--", color=color, label=f"{label} p95")
+        ax.axhline(time_limit_s, color="grey", linestyle=":", linewidth=1, label="time limit")
+        ax.set_title(objective)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.grid(True, which="both", alpha=0.3)
+    for ax in axes.ravel()[len(objectives) :]:
+        ax.set_visible(False)
+    for ax in axes[-1]:
+        ax.set_xlabel("robots")
+    for ax in axes[:, 0]:
+        ax.set_ylabel("exact solve time (s)")
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=3, fontsize="small", frameon=False)
+    fig.suptitle("CP-SAT exact solve time by problem size")
+    fig.tight_layout(rect=(0, 0.08 + 0.02 * (len(series) - 1), 1, 1))
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
