@@ -239,8 +239,17 @@ def _exact_tables(summary: Sequence[dict[str, Any]], cfg: Config) -> str:
         )
         parts.append(
             format_table(
-                ["objective", "robots", "confl/robot", "conflicts", "p50", "p95", "max",
-                 "found", "optimal"],
+                [
+                    "objective",
+                    "robots",
+                    "confl/robot",
+                    "conflicts",
+                    "p50",
+                    "p95",
+                    "max",
+                    "found",
+                    "optimal",
+                ],
                 [
                     [
                         r["objective"],
@@ -269,8 +278,13 @@ def _evaluator_table(ev: dict[str, Any]) -> str:
     table = format_table(
         ["step", "batch", "median ms", "min ms", "assignments/s"],
         [
-            [t["step"], t["batch"], f"{t['median_ms']:.2f}", f"{t['min_ms']:.2f}",
-             f"{t['per_second']:,.0f}"]
+            [
+                t["step"],
+                t["batch"],
+                f"{t['median_ms']:.2f}",
+                f"{t['min_ms']:.2f}",
+                f"{t['per_second']:,.0f}",
+            ]
             for t in ev["timings"]
         ],
     )
@@ -283,32 +297,76 @@ def _parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
         description="Exact-solve times by problem size and evaluator throughput.",
     )
     p.add_argument("--quick", action="store_true", help="a smoke run of under a minute")
-    p.add_argument("--objective", choices=[*OBJECTIVES, "all"], default="all",
-                   help="objective to solve for (default: each of the four)")
-    p.add_argument("--small-robots", type=int, nargs="+", metavar="R",
-                   help="robot counts of the small sets (default 2..8)")
-    p.add_argument("--small-count", type=int, metavar="N",
-                   help="small problems per robot count (default 50; quick 5)")
-    p.add_argument("--large-robots", type=int, nargs="*", metavar="R",
-                   help="robot counts of the stitched sets (default 10 25 50; quick 10 25)")
-    p.add_argument("--large-densities", type=float, nargs="+", metavar="D",
-                   help="conflicts per robot of the stitched sets (default 2 4)")
-    p.add_argument("--large-count", type=int, metavar="N",
-                   help="stitched problems per size and density (default 5; quick 2)")
-    p.add_argument("--time-limit", dest="time_limit_s", type=float, metavar="S",
-                   help="CP-SAT time limit per solve in seconds (default 10; quick 2)")
+    p.add_argument(
+        "--objective",
+        choices=[*OBJECTIVES, "all"],
+        default="all",
+        help="objective to solve for (default: each of the four)",
+    )
+    p.add_argument(
+        "--small-robots",
+        type=int,
+        nargs="+",
+        metavar="R",
+        help="robot counts of the small sets (default 2..8)",
+    )
+    p.add_argument(
+        "--small-count",
+        type=int,
+        metavar="N",
+        help="small problems per robot count (default 50; quick 5)",
+    )
+    p.add_argument(
+        "--large-robots",
+        type=int,
+        nargs="*",
+        metavar="R",
+        help="robot counts of the stitched sets (default 10 25 50; quick 10 25)",
+    )
+    p.add_argument(
+        "--large-densities",
+        type=float,
+        nargs="+",
+        metavar="D",
+        help="conflicts per robot of the stitched sets (default 2 4)",
+    )
+    p.add_argument(
+        "--large-count",
+        type=int,
+        metavar="N",
+        help="stitched problems per size and density (default 5; quick 2)",
+    )
+    p.add_argument(
+        "--time-limit",
+        dest="time_limit_s",
+        type=float,
+        metavar="S",
+        help="CP-SAT time limit per solve in seconds (default 10; quick 2)",
+    )
     p.add_argument("--workers", type=int, help="CP-SAT workers (default 1)")
-    p.add_argument("--no-hint", dest="hint", action="store_false", default=None,
-                   help="do not warm-start CP-SAT from FCFS")
+    p.add_argument(
+        "--no-hint",
+        dest="hint",
+        action="store_false",
+        default=None,
+        help="do not warm-start CP-SAT from FCFS",
+    )
     p.add_argument("--eval-robots", type=int, help="robots of the evaluator graph (default 250)")
-    p.add_argument("--eval-conflicts-per-robot", type=float,
-                   help="conflicts per robot of the evaluator graph (default 4)")
+    p.add_argument(
+        "--eval-conflicts-per-robot",
+        type=float,
+        help="conflicts per robot of the evaluator graph (default 4)",
+    )
     p.add_argument("--eval-samples", type=int, help="assignments per batch (default 100)")
     p.add_argument("--repeats", type=int, help="timing repeats (default 30; quick 10)")
     p.add_argument("--seed", type=int, help="base seed of every problem set (default 0)")
-    p.add_argument("--out", type=Path, default=DEFAULT_OUT,
-                   help=f"directory for results.json, exact_runs.csv, solve_times.png "
-                        f"(default {DEFAULT_OUT}/)")
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=DEFAULT_OUT,
+        help=f"directory for results.json, exact_runs.csv, solve_times.png "
+        f"(default {DEFAULT_OUT}/)",
+    )
     p.add_argument("--no-plot", action="store_true", help="skip the PNG plot")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     return p.parse_args(argv)

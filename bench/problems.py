@@ -69,6 +69,8 @@ def stitched_set(
         seed = derive_seed(base_seed, _STITCHED, robots, density_key, i)
         request = stitched_problem(seed, robots, conflicts_per_robot)
         out.append(
-            BenchProblem("stitched", robots, conflicts_per_robot, i, seed, request, *prepare(request))
+            BenchProblem(
+                "stitched", robots, conflicts_per_robot, i, seed, request, *prepare(request)
+            )
         )
     return out
