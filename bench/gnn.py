@@ -271,7 +271,10 @@ def plot_large(rows: list[dict[str, Any]], path: Path) -> None:
             sel = [[r for r in rows if r["robots"] == n and r["density"] == d] for n in sizes]
             axes[0].plot(
                 sizes,
-                [np.nanmean([delay_ratio(r["best"], r[method], r["free"]) for r in g]) for g in sel],
+                [
+                    np.nanmean([delay_ratio(r["best"], r[method], r["free"]) for r in g])
+                    for g in sel
+                ],
                 style,
                 label=f"{method} {d}",
             )
