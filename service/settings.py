@@ -48,7 +48,7 @@ class Settings(BaseSettings):
     max_body_bytes: int = Field(default=50 * MIB, ge=1)
     # Routing of solver "auto": exact up to this many robots, large_solver above.
     exact_max_robots: int = Field(default=30, ge=0)
-    large_solver: str = "gnn_vae"
+    large_solver: str = "gnn_vae_refined"
     # Where the learned models live (manifest.json + <objective>/<version>/); a missing
     # or corrupt model degrades its objective to the exact solver, then FCFS.
     model_store: Path = DEFAULT_MODEL_STORE

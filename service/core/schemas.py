@@ -44,8 +44,8 @@ OBJECTIVES: tuple[Objective, ...] = (
     "sync_completion",
     "avg_delay",
 )
-SolverName = Literal["auto", "exact", "fcfs", "gnn_vae"]
-SOLVER_NAMES: tuple[SolverName, ...] = ("auto", "exact", "fcfs", "gnn_vae")
+SolverName = Literal["auto", "exact", "fcfs", "gnn_vae", "gnn_vae_refined"]
+SOLVER_NAMES: tuple[SolverName, ...] = ("auto", "exact", "fcfs", "gnn_vae", "gnn_vae_refined")
 
 Time = Annotated[float, Field(strict=True, ge=0.0, le=MAX_TIME, allow_inf_nan=False)]
 Count = Annotated[int, Field(strict=True, ge=1)]

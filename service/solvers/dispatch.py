@@ -27,7 +27,7 @@ from service.core.schemas import (
     ScheduleResponse,
     SolverInfoOut,
 )
-from service.solvers import exact, fcfs, gnn_vae  # noqa: F401  (registers the solvers)
+from service.solvers import exact, fcfs, gnn_vae, refine  # noqa: F401  (registers the solvers)
 from service.solvers.registry import SolveContext, SolverOutput, get_solver
 
 if TYPE_CHECKING:
@@ -40,7 +40,10 @@ log = logging.getLogger(__name__)
 # What answers when a solver has no answer (no solution in time, no model loaded):
 # the learned model degrades to the exact solver with the request's time limit,
 # and everything ends at FCFS, which is instant and valid by construction.
-FALLBACKS: dict[str, tuple[str, ...]] = {"gnn_vae": ("exact", "fcfs")}
+FALLBACKS: dict[str, tuple[str, ...]] = {
+    "gnn_vae": ("exact", "fcfs"),
+    "gnn_vae_refined": ("exact", "fcfs"),
+}
 LAST_RESORT = "fcfs"
 
 

@@ -1,0 +1,68 @@
+"""gnn_vae_refined: valid, never worse than its starting points, deterministic for a seed."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from service.core.check import check
+from service.core.problem import problem_from_request
+from service.core.schemas import ScheduleRequest
+from service.learning.generate import stitched_problem
+from service.learning.store import load_all
+from service.solvers.fcfs import fcfs
+from service.solvers.gnn_vae import gnn_vae
+from service.solvers.refine import gnn_vae_refined, refine
+from service.solvers.registry import SolveContext
+
+STORE = Path(__file__).resolve().parents[2] / "model_store"
+
+
+@pytest.fixture(scope="module")
+def models() -> dict:
+    loaded, errors = load_all(STORE, ("avg_completion", "sync_completion"))
+    assert not errors
+    return loaded
+
+
+def _ctx(seed: int, objective: str, models: dict, time_limit_s: float = 30.0) -> SolveContext:
+    request = ScheduleRequest.model_validate(
+        {**stitched_problem(seed, 30, 3.0), "objective": objective}
+    )
+    return SolveContext(
+        problem_from_request(request), objective, time_limit_s, seed=1, models=models
+    )
+
+
+def _cost(ctx: SolveContext, output) -> float:
+    return float(ctx.evaluator.evaluate(output.assignment).costs[ctx.objective][0])
+
+
+@pytest.mark.parametrize("objective", ["avg_completion", "sync_completion"])
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_refined_is_valid_and_never_worse(seed: int, objective: str, models: dict) -> None:
+    ctx = _ctx(seed, objective, models)
+    out = gnn_vae_refined(ctx)
+    assert out is not None and out.model is not None
+    assert check(ctx.problem, ctx.cliques, out.assignment).ok.all()
+    cost = _cost(ctx, out)
+    assert cost <= _cost(ctx, fcfs(ctx)) + 1e-9
+    assert cost <= _cost(ctx, gnn_vae(ctx)) + 1e-9
+
+
+def test_search_is_deterministic_when_it_ends_by_patience(models: dict) -> None:
+    ctx = _ctx(4, "avg_completion", models)
+    bids = ctx.problem.node_enter + 1.0  # any positive bids
+    scores = np.linspace(0.0, 1.0, ctx.problem.n_conflicts)
+    first, cost = refine(ctx, bids, scores, budget_s=120.0)
+    again, cost_again = refine(_ctx(4, "avg_completion", models), bids, scores, budget_s=120.0)
+    assert cost == cost_again
+    assert (first.a_first == again.a_first).all() and (first.following == again.following).all()
+    start = ctx.evaluator.evaluate(ctx.decoder.decode(bids[None], scores[None]))
+    assert cost <= float(start.costs["avg_completion"][0])
+
+
+def test_refined_without_a_model_has_no_answer() -> None:
+    assert gnn_vae_refined(_ctx(0, "avg_completion", {})) is None
