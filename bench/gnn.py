@@ -41,6 +41,7 @@ from service.learning.infer import best_of
 from service.learning.store import StoredModel, load_all
 from service.solvers.exact import solve
 from service.solvers.fcfs import fcfs
+from service.solvers.refine import gnn_vae_refined
 from service.solvers.registry import SolveContext
 
 HELDOUT_SEED = 1  # training data uses seed 0
@@ -81,6 +82,17 @@ def run_gnn(
     _, cost = best_of(
         stored.model, graph, Decoder(prep.problem, cliques), evaluator, objective, samples, seed=0
     )
+    return cost, time.perf_counter() - start
+
+
+def run_refined(
+    models: dict[str, StoredModel], prep: Prepared, objective: str, limit: float
+) -> tuple[float, float]:
+    """(cost, seconds) of gnn_vae_refined on one problem, request overhead included."""
+    start = time.perf_counter()
+    ctx = SolveContext(prep.problem, objective, time_limit_s=limit, models=models)
+    out = gnn_vae_refined(ctx)
+    cost = float(ctx.evaluator.evaluate(out.assignment).costs[objective][0])
     return cost, time.perf_counter() - start
 
 
@@ -155,6 +167,7 @@ def large_rows(
     for n, dname, k in tqdm(jobs, desc="large", unit="problem"):
         prep = Prepared.of(stitched_problem(1000 * n + k, n, densities[dname], objective))
         gnn_cost, gnn_s = run_gnn(models[objective], prep, objective, samples)
+        refined_cost, refined_s = run_refined(models, prep, objective, limit)
         evaluator = Evaluator(prep.problem)
         trace: list[tuple[float, float]] = []
 
@@ -166,9 +179,11 @@ def large_rows(
             prep.problem, find_cliques(prep.problem), objective, limit, on_solution=record
         )
         exact_s = time.perf_counter() - start
+
+        def reach(cost: float, tr: list = trace) -> float | None:
+            return next((t for t, c in tr if c <= cost * (1 + 1e-9)), None)
+
         exact_cost = trace[-1][1] if trace else float("inf")
-        reach = next((t for t, c in trace if c <= gnn_cost * (1 + 1e-9)), None)
-        best = min(gnn_cost, exact_cost)
         rows.append(
             {
                 "robots": n,
@@ -178,11 +193,14 @@ def large_rows(
                 "free": evaluator.free_costs()[objective],
                 "gnn": gnn_cost,
                 "gnn_s": gnn_s,
+                "refined": refined_cost,
+                "refined_s": refined_s,
                 "exact": exact_cost,
                 "exact_s": exact_s,
                 "exact_optimal": bool(result is not None and result.optimal),
-                "exact_reach_gnn_s": reach,
-                "best": best,
+                "exact_reach_gnn_s": reach(gnn_cost),
+                "exact_reach_refined_s": reach(refined_cost),
+                "best": min(gnn_cost, refined_cost, exact_cost),
                 "fcfs": run_fcfs(prep, objective),
             }
         )
@@ -223,36 +241,49 @@ def summarize_small(rows: list[dict[str, Any]]) -> list[str]:
     return out
 
 
+def _reach_text(sel: list[dict[str, Any]], key: str) -> str:
+    """Mean CP-SAT time to reach a method's cost ('+': some never did, counted at the limit)."""
+    reach = [r[key] for r in sel]
+    never = sum(x is None for x in reach)
+    if never == len(sel):
+        return "never"
+    capped = [r["exact_s"] if x is None else x for x, r in zip(reach, sel, strict=True)]
+    return f"{np.mean(capped):.2f}" + "+" * bool(never)
+
+
+LARGE_METHODS = ("fcfs", "gnn", "refined", "exact")
+
+
 def summarize_large(rows: list[dict[str, Any]]) -> list[str]:
-    """Table lines: per size and density, GNN-VAE vs CP-SAT side by side."""
+    """Table lines: per size and density, every method side by side."""
+    head = "".join(f" {m + ' ratio/dr':>17}" for m in LARGE_METHODS)
     out = [
-        f"{'robots':>6} {'density':8} {'confl':>6} {'gnn ratio':>9} {'gnn dr':>7} {'gnn s':>7} "
-        f"{'exact ratio':>11} {'exact s':>8} {'proven':>6} {'exact->gnn s':>12} {'fcfs dr':>7}"
+        f"{'robots':>6} {'density':8} {'confl':>6}{head} {'gnn s':>6} {'ref s':>6} "
+        f"{'exact s':>8} {'proven':>6} {'ex->gnn s':>9} {'ex->ref s':>9}"
     ]
     for n in sorted({r["robots"] for r in rows}):
         for d in sorted({r["density"] for r in rows}):
             sel = [r for r in rows if r["robots"] == n and r["density"] == d]
             if not sel:
                 continue
-            reach = [r["exact_reach_gnn_s"] for r in sel]
-            capped = [r["exact_s"] if x is None else x for x, r in zip(reach, sel, strict=True)]
-            never = sum(x is None for x in reach)
-            reach_txt = (
-                "never" if never == len(sel) else f"{np.mean(capped):.2f}" + "+" * bool(never)
+            cells = "".join(
+                f" {np.mean([_ratio(r['best'], r[m]) for r in sel]):8.4f}/"
+                f"{np.nanmean([delay_ratio(r['best'], r[m], r['free']) for r in sel]):<8.3f}"
+                for m in LARGE_METHODS
             )
             out.append(
-                f"{n:6d} {d:8} {np.mean([r['conflicts'] for r in sel]):6.0f} "
-                f"{np.mean([_ratio(r['best'], r['gnn']) for r in sel]):9.4f} "
-                f"{np.nanmean([delay_ratio(r['best'], r['gnn'], r['free']) for r in sel]):7.3f} "
-                f"{np.mean([r['gnn_s'] for r in sel]):7.3f} "
-                f"{np.mean([_ratio(r['best'], r['exact']) for r in sel]):11.4f} "
+                f"{n:6d} {d:8} {np.mean([r['conflicts'] for r in sel]):6.0f}{cells} "
+                f"{np.mean([r['gnn_s'] for r in sel]):6.3f} "
+                f"{np.mean([r['refined_s'] for r in sel]):6.3f} "
                 f"{np.mean([r['exact_s'] for r in sel]):8.2f} "
-                f"{sum(r['exact_optimal'] for r in sel):3d}/{len(sel):<2d} {reach_txt:>12} "
-                f"{np.nanmean([delay_ratio(r['best'], r['fcfs'], r['free']) for r in sel]):7.3f}"
+                f"{sum(r['exact_optimal'] for r in sel):3d}/{len(sel):<2d} "
+                f"{_reach_text(sel, 'exact_reach_gnn_s'):>9} "
+                f"{_reach_text(sel, 'exact_reach_refined_s'):>9}"
             )
     out.append(
-        "ratios against the best cost either method found; exact->gnn s: CP-SAT time to "
-        "reach the GNN-VAE's cost ('+': some never did within the limit, counted at the limit)"
+        "ratio = best known / cost, dr = delay ratio, against the best cost any method found; "
+        "ex->X s: CP-SAT time to reach method X's cost ('+': some never did within the limit, "
+        "counted at the limit); gnn = gnn_vae (S samples), ref = gnn_vae_refined"
     )
     return out
 
@@ -267,7 +298,7 @@ def plot_large(rows: list[dict[str, Any]], path: Path) -> None:
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
     for d in sorted({r["density"] for r in rows}):
         sizes = sorted({r["robots"] for r in rows if r["density"] == d})
-        for method, style in (("gnn", "-o"), ("exact", "--s")):
+        for method, style in (("gnn", "-o"), ("refined", "-^"), ("exact", "--s"), ("fcfs", ":x")):
             sel = [[r for r in rows if r["robots"] == n and r["density"] == d] for n in sizes]
             axes[0].plot(
                 sizes,
@@ -278,12 +309,13 @@ def plot_large(rows: list[dict[str, Any]], path: Path) -> None:
                 style,
                 label=f"{method} {d}",
             )
-            axes[1].plot(
-                sizes,
-                [np.mean([r[f"{method}_s"] for r in s]) for s in sel],
-                style,
-                label=f"{method} {d}",
-            )
+            if method != "fcfs":  # instant; its time is not recorded
+                axes[1].plot(
+                    sizes,
+                    [np.mean([r[f"{method}_s"] for r in g]) for g in sel],
+                    style,
+                    label=f"{method} {d}",
+                )
     axes[0].set(xlabel="robots", ylabel="mean delay ratio", title="quality vs best known")
     axes[1].set(xlabel="robots", ylabel="seconds", yscale="log", title="runtime")
     for ax in axes:
