@@ -17,13 +17,12 @@ from typing import Literal
 from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
+from service.core.schemas import MAX_TIME_LIMIT_S
 from service.solvers.dispatch import DispatchPolicy
 
 __all__ = ["MIB", "Settings", "get_settings"]
 
 MIB = 1024 * 1024
-# The largest options.time_limit_s a request may ask (service.core.schemas.OptionsIn).
-MAX_TIME_LIMIT_S = 300.0
 
 # The model store shipped in the repository (the Dockerfile copies it to the same place).
 DEFAULT_MODEL_STORE = Path(__file__).resolve().parents[1] / "model_store"

@@ -14,6 +14,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 __all__ = [
     "MAX_TIME",
+    "MAX_TIME_LIMIT_S",
     "OBJECTIVES",
     "SOLVER_NAMES",
     "Objective",
@@ -36,6 +37,8 @@ __all__ = [
 # Times above this are rejected: ~31.7 years in seconds. It keeps integer-scaled
 # times of the exact solver far from int64 overflow while allowing any real time scale.
 MAX_TIME = 1e9
+# The longest solve a request may ask for (options.time_limit_s), in seconds.
+MAX_TIME_LIMIT_S = 300.0
 
 Objective = Literal["avg_completion", "max_completion", "sync_completion", "avg_delay"]
 OBJECTIVES: tuple[Objective, ...] = (
@@ -97,7 +100,7 @@ class OptionsIn(_Strict):
     """How to solve: which solver, how long, which seed, how many samples."""
 
     solver: SolverName = "auto"
-    time_limit_s: float | None = Field(default=None, gt=0.0, le=300.0, strict=True)
+    time_limit_s: float | None = Field(default=None, gt=0.0, le=MAX_TIME_LIMIT_S, strict=True)
     seed: int = Field(default=0, ge=0, le=2**31 - 1, strict=True)
     samples: int | None = Field(default=None, ge=1, le=1000, strict=True)
 

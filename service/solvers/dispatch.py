@@ -33,7 +33,7 @@ from service.solvers.registry import SolveContext, SolverOutput, get_solver
 if TYPE_CHECKING:
     from service.learning.store import StoredModel
 
-__all__ = ["DispatchPolicy", "InvalidAnswerError", "dispatch"]
+__all__ = ["FALLBACKS", "LAST_RESORT", "DispatchPolicy", "InvalidAnswerError", "dispatch"]
 
 log = logging.getLogger(__name__)
 
