@@ -45,8 +45,10 @@ class Settings(BaseSettings):
     max_nodes: int = Field(default=100_000, ge=1)
     max_conflicts: int = Field(default=200_000, ge=0)
     max_body_bytes: int = Field(default=50 * MIB, ge=1)
-    # Routing of solver "auto": exact up to this many robots, large_solver above.
-    exact_max_robots: int = Field(default=30, ge=0)
+    # Routing of solver "auto": exact up to this many conflicts, large_solver above.
+    # Conflict density, not robot count, makes CP-SAT slow: measured (docs/benchmarks.md)
+    # it proves 25 robots x 2 conflicts (50) in < 0.5 s but not 25 x 4 (100) in 10 s.
+    exact_max_conflicts: int = Field(default=60, ge=0)
     large_solver: str = "gnn_vae_refined"
     # Where the learned models live (manifest.json + <objective>/<version>/); a missing
     # or corrupt model degrades its objective to the exact solver, then FCFS.
@@ -74,7 +76,7 @@ class Settings(BaseSettings):
         """The routing and limits :func:`service.solvers.dispatch.dispatch` applies."""
         return DispatchPolicy(
             default_time_limit_s=self.default_time_limit_s,
-            exact_max_robots=self.exact_max_robots,
+            exact_max_conflicts=self.exact_max_conflicts,
             large_solver=self.large_solver,
             exact_workers=self.exact_workers,
         )

@@ -56,18 +56,18 @@ class DispatchPolicy:
     """How requests are routed and limited (built from the settings)."""
 
     default_time_limit_s: float = 5.0
-    exact_max_robots: int = 30
+    exact_max_conflicts: int = 60
     large_solver: str = "exact"
     exact_workers: int = 1
     models: Mapping[str, StoredModel] = field(default_factory=dict)  # loaded GNN-VAEs by objective
 
 
-def choose_solver(request: ScheduleRequest, n_robots: int, policy: DispatchPolicy) -> str:
+def choose_solver(request: ScheduleRequest, n_conflicts: int, policy: DispatchPolicy) -> str:
     """The solver that answers: the requested one, or by size for ``auto``."""
     name = request.options.solver
     if name != "auto":
         return name
-    return "exact" if n_robots <= policy.exact_max_robots else policy.large_solver
+    return "exact" if n_conflicts <= policy.exact_max_conflicts else policy.large_solver
 
 
 def dispatch(request: ScheduleRequest, policy: DispatchPolicy) -> ScheduleResponse:
@@ -87,7 +87,7 @@ def dispatch(request: ScheduleRequest, policy: DispatchPolicy) -> ScheduleRespon
         workers=policy.exact_workers,
         models=policy.models,
     )
-    name = choose_solver(request, problem.n_robots, policy)
+    name = choose_solver(request, problem.n_conflicts, policy)
     start = time.perf_counter()
     used, output, checks = _first_valid_answer(ctx, name)
     runtime = time.perf_counter() - start

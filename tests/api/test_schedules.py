@@ -35,7 +35,7 @@ async def test_every_solver_answers(
     answer = response.json()
     assert_valid_answer(tiny, answer)
     if solver == "auto":
-        assert answer["solver"]["name"] == "exact"  # 3 robots: under exact_max_robots
+        assert answer["solver"]["name"] == "exact"  # 3 conflicts: under exact_max_conflicts
     elif solver == "gnn_vae":  # the shipped model answers
         assert answer["solver"]["name"] == "gnn_vae"
         assert answer["solver"]["model"].startswith(f"gnn_vae/{tiny['objective']}/")

@@ -20,9 +20,9 @@ def test_defaults() -> None:
 def test_environment_overrides(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("SCHEDULER_PORT", "9001")
     monkeypatch.setenv("SCHEDULER_LOG_LEVEL", "DEBUG")
-    monkeypatch.setenv("SCHEDULER_EXACT_MAX_ROBOTS", "12")
+    monkeypatch.setenv("SCHEDULER_EXACT_MAX_CONFLICTS", "12")
     s = Settings()
-    assert (s.port, s.log_level, s.exact_max_robots) == (9001, "debug", 12)
+    assert (s.port, s.log_level, s.exact_max_conflicts) == (9001, "debug", 12)
 
 
 @pytest.mark.parametrize(
@@ -47,10 +47,10 @@ def test_invalid_values_are_refused(field: str, value: object) -> None:
 
 def test_dispatch_policy_follows_settings() -> None:
     s = Settings(
-        default_time_limit_s=2.5, exact_max_robots=10, large_solver="fcfs", exact_workers=4
+        default_time_limit_s=2.5, exact_max_conflicts=10, large_solver="fcfs", exact_workers=4
     )
     assert s.dispatch_policy() == DispatchPolicy(
-        default_time_limit_s=2.5, exact_max_robots=10, large_solver="fcfs", exact_workers=4
+        default_time_limit_s=2.5, exact_max_conflicts=10, large_solver="fcfs", exact_workers=4
     )
 
 

@@ -14,17 +14,18 @@ from torch_geometric.data import Batch
 
 from service.core.check import check
 from service.core.cliques import find_cliques
+from service.core.decode import Decoder
 from service.core.evaluate import Evaluator
 from service.core.problem import problem_from_request
 from service.core.schemas import OBJECTIVES, ScheduleRequest
 from service.learning.data import DatasetConfig, solve_problem
 from service.learning.dataset import examples_from_records, to_data
 from service.learning.features import graph_tensors
+from service.learning.generate import GeneratorConfig, small_problem, stitched_problem
 from service.learning.infer import best_of, decode_candidates, propose
 from service.learning.model import GnnVae, GnnVaeConfig
 from service.learning.store import ModelLoadError, load_all, load_model, save_model
 from service.learning.train import WEIGHTS, loss_terms
-from service.learning.generate import GeneratorConfig, small_problem, stitched_problem
 
 TINY = GnnVaeConfig(hidden=16, latent=4, encoder_layers=1, decoder_layers=2, heads=1)
 SHIPPED = Path(__file__).resolve().parents[2] / "model_store"
@@ -95,8 +96,6 @@ def test_decoded_samples_are_always_valid(seed: int, z_seed: int, big: bool) -> 
     model = GnnVae(TINY).eval()
     bids, probs = propose(model, graph_tensors(problem, cliques), samples=8, seed=z_seed)
     assert bids.shape == (8, problem.n_nodes) and probs.shape == (8, problem.n_conflicts)
-    from service.core.decode import Decoder
-
     for objective in OBJECTIVES:
         candidates = decode_candidates(Decoder(problem, cliques), bids, probs, objective)
         assert check(problem, cliques, candidates).ok.all()
@@ -127,11 +126,14 @@ def test_shipped_models_load_and_answer(objective: str) -> None:
     assert objective in manifest["default"]
     stored = load_model(SHIPPED, objective)
     problem, cliques = _problem(small_problem(5))
-    from service.core.decode import Decoder
-
     assignment, cost = best_of(
-        stored.model, graph_tensors(problem, cliques), Decoder(problem, cliques),
-        Evaluator(problem), objective, samples=10, seed=0,
+        stored.model,
+        graph_tensors(problem, cliques),
+        Decoder(problem, cliques),
+        Evaluator(problem),
+        objective,
+        samples=10,
+        seed=0,
     )
     assert check(problem, cliques, assignment).ok.all()
     assert np.isfinite(cost)

@@ -16,7 +16,7 @@ from service.solvers.dispatch import DispatchPolicy, choose_solver, dispatch
 from service.solvers.registry import SolveContext, SolverOutput
 from tests.reference import costs, least_times, reference_problem, trap_request
 
-POLICY = DispatchPolicy(default_time_limit_s=10.0, exact_max_robots=30)
+POLICY = DispatchPolicy(default_time_limit_s=10.0, exact_max_conflicts=60)
 
 
 def _request(req: dict[str, Any], **options: Any) -> ScheduleRequest:
@@ -78,7 +78,7 @@ def test_invalid_answer_is_never_returned(monkeypatch: pytest.MonkeyPatch) -> No
 def test_auto_routes_by_size() -> None:
     small = _request(small_problem(0), solver="auto")
     assert choose_solver(small, 2, POLICY) == "exact"
-    assert choose_solver(small, 31, POLICY) == POLICY.large_solver
+    assert choose_solver(small, 61, POLICY) == POLICY.large_solver
     assert choose_solver(_request(small_problem(0), solver="fcfs"), 2, POLICY) == "fcfs"
 
 
