@@ -64,9 +64,10 @@ class Prepared:
 
 def delay_ratio(opt: float, cost: float, free: float) -> float:
     """(opt - free) / (cost - free), 1 at the optimum; NaN where free is no lower bound."""
-    if cost <= opt + 1e-9 * max(1.0, abs(opt)):
+    tol = 1e-9 * max(1.0, abs(opt))
+    if cost <= opt + tol:
         return 1.0
-    if cost <= free:  # sync_completion is not monotone: zero delay need not be a bound
+    if opt < free - tol:  # sync_completion is not monotone: zero delay need not be a bound
         return float("nan")
     return (opt - free) / (cost - free)
 
@@ -337,7 +338,17 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--large-objective", choices=OBJECTIVES, default="avg_completion")
     p.add_argument("--samples", type=int, default=100)
     p.add_argument("--out", type=Path, default=Path("bench/out/gnn"))
+    p.add_argument(
+        "--summarize",
+        action="store_true",
+        help="only re-render tables and plot from the raw results in --out",
+    )
     args = p.parse_args(argv)
+    if args.summarize:
+        rows = json.loads((args.out / "small.json").read_text())
+        large = json.loads((args.out / "large.json").read_text())
+        report(rows, large, args.out)
+        return
     if args.quick:
         args.small, args.sizes, args.per_size, args.exact_limit = 20, [25, 50], 1, 5.0
     models, errors = load_all(args.store, OBJECTIVES)
@@ -355,12 +366,17 @@ def main(argv: list[str] | None = None) -> None:
         args.large_objective,
         args.samples,
     )
-    lines = summarize_small(rows) + [""] + summarize_large(large)
-    print("\n".join(lines))
     (args.out / "small.json").write_text(json.dumps(rows, indent=1))
     (args.out / "large.json").write_text(json.dumps(large, indent=1))
-    (args.out / "tables.txt").write_text("\n".join(lines) + "\n")
-    plot_large(large, args.out / "large.png")
+    report(rows, large, args.out)
+
+
+def report(rows: list[dict[str, Any]], large: list[dict[str, Any]], out: Path) -> None:
+    """Print the tables and write them and the plot under ``out``."""
+    lines = summarize_small(rows) + [""] + summarize_large(large)
+    print("\n".join(lines))
+    (out / "tables.txt").write_text("\n".join(lines) + "\n")
+    plot_large(large, out / "large.png")
 
 
 if __name__ == "__main__":

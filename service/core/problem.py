@@ -104,7 +104,7 @@ class Problem:
         """(M, 2) int: node index of side a and side b of every conflict."""
         return np.stack([self.conf_a, self.conf_b], axis=1)
 
-    @property
+    @cached_property
     def tp_robot(self) -> np.ndarray:
         """(P,) int: the robot each time point belongs to."""
         return np.repeat(np.arange(self.n_robots), np.diff(self.tp_start))

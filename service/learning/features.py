@@ -51,13 +51,12 @@ class GraphTensors:
     """Skeleton-graph tensors of one problem.
 
     Shapes: x (V, NODE_DIM); edge_index (2, Ep + 2M); edge_attr (Ep + 2M, EDGE_DIM);
-    robot_of_node (V,) long; conf (M, 2) long node indices (side a, side b).
+    conf (M, 2) long node indices (side a, side b).
     """
 
     x: torch.Tensor
     edge_index: torch.Tensor
     edge_attr: torch.Tensor
-    robot_of_node: torch.Tensor
     conf: torch.Tensor
     n_precedence: int
 
@@ -136,7 +135,6 @@ def graph_tensors(problem: Problem, cliques: Cliques) -> GraphTensors:
         x=torch.from_numpy(_node_features(problem, unit)),
         edge_index=torch.from_numpy(edge_index.astype(np.int64)),
         edge_attr=torch.from_numpy(attr),
-        robot_of_node=torch.from_numpy(problem.node_robot.astype(np.int64)),
         conf=torch.from_numpy(problem.conf_nodes.astype(np.int64)),
         n_precedence=int(prec.size),
     )

@@ -87,7 +87,6 @@ class ExactResult:
 
     assignment: Assignments
     optimal: bool
-    objective_value: float
 
 
 def time_scale(problem: Problem) -> float:
@@ -307,7 +306,7 @@ def solve(
     status = solver.solve(em.model, callback)
     if status not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
         return None
-    return ExactResult(_read(solver, em), status == cp_model.OPTIMAL, solver.objective_value)
+    return ExactResult(_read(solver, em), status == cp_model.OPTIMAL)
 
 
 def top_assignments(
@@ -335,7 +334,7 @@ def top_assignments(
         if status not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
             break
         found = _read(solver, em)
-        results.append(ExactResult(found, status == cp_model.OPTIMAL, solver.objective_value))
+        results.append(ExactResult(found, status == cp_model.OPTIMAL))
         if status != cp_model.OPTIMAL:
             break
         em.exclude(found)
