@@ -33,7 +33,7 @@ from service.core.cliques import find_cliques
 from service.core.evaluate import Evaluator
 from service.core.problem import problem_from_request
 from service.core.schemas import OBJECTIVES, ScheduleRequest
-from service.learning.generate import GeneratorConfig, small_problem
+from service.learning.generate import GeneratorConfig, small_problem, stitched_problem
 from service.solvers.exact import top_assignments
 
 __all__ = ["DatasetConfig", "build_dataset", "iter_problems", "load_manifest"]
@@ -53,16 +53,32 @@ class DatasetConfig:
     shard_size: int = 100
     solve_time_limit_s: float = 10.0  # per CP-SAT solve; small problems take ~10 ms
     generator: GeneratorConfig = field(default_factory=GeneratorConfig)
+    # "small": the published generator; "stitched": problems of robots in
+    # ``stitched_robots`` with conflicts per robot uniform in ``stitched_density``,
+    # labelled by CP-SAT's best within ``solve_time_limit_s`` (not always proven).
+    kind: str = "small"
+    stitched_robots: tuple[int, int] = (10, 40)
+    stitched_density: tuple[float, float] = (1.5, 4.0)
 
 
 def _bits(mask: np.ndarray) -> str:
     return "".join("1" if x else "0" for x in mask.tolist())
 
 
+def _generate(cfg: DatasetConfig, seed: int) -> dict[str, Any]:
+    """The problem of ``seed`` for the dataset's kind."""
+    if cfg.kind == "small":
+        return small_problem(seed, cfg.objectives[0], cfg.generator)
+    rng = np.random.default_rng(seed)
+    robots = int(rng.integers(cfg.stitched_robots[0], cfg.stitched_robots[1] + 1))
+    density = float(rng.uniform(*cfg.stitched_density))
+    return stitched_problem(seed, robots, density, cfg.objectives[0], cfg.generator)
+
+
 def solve_problem(cfg: DatasetConfig, index: int) -> dict[str, Any]:
     """Generate problem ``index`` and its top-L assignments for every objective."""
     seed = int(np.random.SeedSequence([cfg.seed, index]).generate_state(1)[0])
-    request = small_problem(seed, cfg.objectives[0], cfg.generator)
+    request = _generate(cfg, seed)
     problem = problem_from_request(ScheduleRequest.model_validate(request))
     cliques = find_cliques(problem)
     evaluator = Evaluator(problem)
@@ -98,9 +114,8 @@ def _solve_shard(args: tuple[DatasetConfig, int, str]) -> int:
 
 
 def _config_dict(cfg: DatasetConfig) -> dict[str, Any]:
-    d = asdict(cfg)
-    d["objectives"] = list(cfg.objectives)
-    return d
+    """The config as it reads back from the manifest (tuples become lists)."""
+    return json.loads(json.dumps(asdict(cfg)))
 
 
 def build_dataset(cfg: DatasetConfig, out: Path, workers: int = 2) -> dict[str, Any]:
@@ -168,6 +183,9 @@ def main(argv: list[str] | None = None) -> None:
         default=1.0,
         help="multiply every generated time (tests time-scale invariance)",
     )
+    parser.add_argument("--kind", choices=("small", "stitched"), default="small")
+    parser.add_argument("--objectives", nargs="+", choices=OBJECTIVES, default=list(OBJECTIVES))
+    parser.add_argument("--solve-time-limit", type=float, default=DatasetConfig.solve_time_limit_s)
     args = parser.parse_args(argv)
     cfg = DatasetConfig(
         problems=args.problems,
@@ -175,6 +193,9 @@ def main(argv: list[str] | None = None) -> None:
         top=args.top,
         shard_size=args.shard_size,
         generator=GeneratorConfig(time_scale=args.time_scale),
+        kind=args.kind,
+        objectives=tuple(args.objectives),
+        solve_time_limit_s=args.solve_time_limit,
     )
     manifest = build_dataset(cfg, args.out, args.workers)
     print(json.dumps({k: manifest[k] for k in ("problems", "shards", "sha256")}))
