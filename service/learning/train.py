@@ -1,6 +1,7 @@
 """Training CLI for one objective's GNN-VAE, resumable, with per-epoch validation.
 
 ``python -m service.learning.train --data data/small-v1 --objective avg_completion``
+(``--data`` takes several datasets, e.g. ``data/small-v1 data/medium-v1``.)
 
 Losses (published weights 1, 1, 0.01): hinge on chain ranks
 sum_c max(r_first - r_second + gamma, 0) with gamma = 0.1 (averaged over the
@@ -119,7 +120,7 @@ def _epoch(
 
 
 def train(
-    data: Path,
+    data: list[Path],
     objective: str,
     run_dir: Path,
     model_cfg: GnnVaeConfig,
@@ -129,9 +130,11 @@ def train(
 ) -> dict[str, Any]:
     """Train (or resume) and return the best epoch's validation figures and state."""
     torch.manual_seed(cfg.seed)
-    records = list(iter_problems(data, None if n_train is None else n_train + n_val))
-    train_ex = examples_from_records(records[:-n_val], objective)
-    val_ex = examples_from_records(records[-n_val:], objective)
+    train_ex, val_ex = [], []
+    for path in data:  # the last n_val problems of every dataset are held out
+        records = list(iter_problems(path, None if n_train is None else n_train + n_val))
+        train_ex += examples_from_records(records[:-n_val], objective)
+        val_ex += examples_from_records(records[-n_val:], objective)
     model = GnnVae(model_cfg)
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -173,7 +176,9 @@ def train(
 def main(argv: list[str] | None = None) -> None:
     """CLI entry: train one objective and write it to the model store."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--data", type=Path, required=True)
+    p.add_argument(
+        "--data", type=Path, nargs="+", required=True, help="dataset folders (trained on together)"
+    )
     p.add_argument("--objective", choices=OBJECTIVES, required=True)
     p.add_argument("--runs", type=Path, default=Path("runs"))
     p.add_argument("--store", type=Path, default=Path("model_store"))
@@ -200,20 +205,18 @@ def main(argv: list[str] | None = None) -> None:
         args.val,
     )
     state = result["state"]
-    manifest = load_manifest(args.data)
     folder = save_model(
         result["model"],
         args.store,
         args.objective,
         args.version,
         {
-            "dataset": {
-                "path": str(args.data),
-                "sha256": manifest.get("sha256"),
-                "config": manifest["config"],
-                "train_problems": state["n_train"],
-                "val_problems": state["n_val"],
-            },
+            "datasets": [
+                {"path": str(path), "sha256": m.get("sha256"), "config": m["config"]}
+                for path, m in ((p, load_manifest(p)) for p in args.data)
+            ],
+            "train_problems": state["n_train"],
+            "val_problems": state["n_val"],
             "training": {
                 **asdict(cfg),
                 "best_epoch": state["best_epoch"],
