@@ -57,7 +57,7 @@ class DispatchPolicy:
 
     default_time_limit_s: float = 5.0
     exact_max_conflicts: int = 60
-    large_solver: str = "exact"
+    large_solver: str = "gnn_vae_refined"
     exact_workers: int = 1
     models: Mapping[str, StoredModel] = field(default_factory=dict)  # loaded GNN-VAEs by objective
 
