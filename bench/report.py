@@ -153,12 +153,13 @@ def plot_solve_times(summary: Sequence[dict[str, Any]], time_limit_s: float, pat
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import NullFormatter, ScalarFormatter
 
     objectives = list(dict.fromkeys(row["objective"] for row in summary))
     cols = 2 if len(objectives) > 1 else 1
     nrows = (len(objectives) + cols - 1) // cols
     fig, axes = plt.subplots(
-        nrows, cols, figsize=(6.0 * cols, 4.0 * nrows), squeeze=False, sharex=True, sharey=True
+        nrows, cols, figsize=(12.0, 4.0 * nrows), squeeze=False, sharex=True, sharey=True
     )
     series: dict[tuple[str, float | None], str] = {("small", None): "small"}
     for row in summary:
@@ -186,6 +187,9 @@ def plot_solve_times(summary: Sequence[dict[str, Any]], time_limit_s: float, pat
         ax.set_title(objective)
         ax.set_xscale("log")
         ax.set_yscale("log")
+        ax.set_xticks(sorted({r["robots"] for r in summary}))
+        ax.xaxis.set_major_formatter(ScalarFormatter())
+        ax.xaxis.set_minor_formatter(NullFormatter())
         ax.grid(True, which="both", alpha=0.3)
     for ax in axes.ravel()[len(objectives) :]:
         ax.set_visible(False)
@@ -196,6 +200,7 @@ def plot_solve_times(summary: Sequence[dict[str, Any]], time_limit_s: float, pat
     handles, labels = axes[0, 0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="lower center", ncol=3, fontsize="small", frameon=False)
     fig.suptitle("CP-SAT exact solve time by problem size")
-    fig.tight_layout(rect=(0, 0.08 + 0.02 * (len(series) - 1), 1, 1))
+    legend_rows = -(-(2 * len(series) + 1) // 3)  # ceil(entries / 3 columns)
+    fig.tight_layout(rect=(0, (0.045 * legend_rows + 0.02) / nrows, 1, 1))
     fig.savefig(path, dpi=120)
     plt.close(fig)
