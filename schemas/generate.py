@@ -15,6 +15,8 @@ from service.core.schemas import ScheduleRequest, ScheduleResponse
 from service.learning.generate import stitched_problem
 
 HERE = Path(__file__).resolve().parent
+# pydantic 2 writes JSON Schema draft 2020-12; saying so lets validators pick the right rules.
+DIALECT = "https://json-schema.org/draft/2020-12/schema"
 # The mid-size example: 20 robots, about 3 conflicts per robot, fixed seed.
 MID_SEED, MID_ROBOTS, MID_DENSITY = 20, 20, 3.0
 
@@ -24,10 +26,14 @@ def documents() -> dict[Path, Any]:
     mid = stitched_problem(MID_SEED, MID_ROBOTS, MID_DENSITY)
     mid["options"] = {"solver": "auto", "time_limit_s": 10.0, "seed": 0}
     return {
-        HERE / "request.schema.json": ScheduleRequest.model_json_schema(mode="validation"),
-        HERE / "response.schema.json": ScheduleResponse.model_json_schema(
-            mode="serialization", by_alias=True
-        ),
+        HERE / "request.schema.json": {
+            "$schema": DIALECT,
+            **ScheduleRequest.model_json_schema(mode="validation"),
+        },
+        HERE / "response.schema.json": {
+            "$schema": DIALECT,
+            **ScheduleResponse.model_json_schema(mode="serialization", by_alias=True),
+        },
         HERE / "examples" / "mid.json": mid,
     }
 

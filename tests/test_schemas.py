@@ -1,10 +1,15 @@
-"""The committed JSON Schemas and examples match the code, and the examples are valid."""
+"""The committed JSON Schemas and examples match the code, and the examples are valid.
+
+Validation against the JSON Schemas themselves needs the ``jsonschema`` package,
+which is not a project dependency: those tests are skipped where it is missing.
+"""
 
 from __future__ import annotations
 
 import importlib.util
 import json
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -12,6 +17,7 @@ from service.core.schemas import ScheduleRequest
 from service.solvers.dispatch import DispatchPolicy, dispatch
 
 SCHEMAS = Path(__file__).resolve().parents[1] / "schemas"
+EXAMPLES = sorted(p.name for p in (SCHEMAS / "examples").glob("*.json"))
 
 
 def _generator():
@@ -19,6 +25,18 @@ def _generator():
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
+
+
+def _load(path: Path) -> Any:
+    return json.loads(path.read_text())
+
+
+def _validator(name: str):
+    """A draft 2020-12 validator of a committed schema (skips without ``jsonschema``)."""
+    jsonschema = pytest.importorskip("jsonschema")
+    schema = _load(SCHEMAS / name)
+    jsonschema.Draft202012Validator.check_schema(schema)
+    return jsonschema.Draft202012Validator(schema)
 
 
 def test_committed_files_match_the_code() -> None:
@@ -29,14 +47,43 @@ def test_committed_files_match_the_code() -> None:
         )
 
 
-@pytest.mark.parametrize("name", ["tiny.json", "mid.json"])
+def test_both_examples_are_committed() -> None:
+    assert {"tiny.json", "mid.json"} <= set(EXAMPLES)
+
+
+@pytest.mark.parametrize("name", EXAMPLES)
 def test_examples_are_valid_and_solve(name: str) -> None:
-    request = ScheduleRequest.model_validate(json.loads((SCHEMAS / "examples" / name).read_text()))
+    request = ScheduleRequest.model_validate(_load(SCHEMAS / "examples" / name))
     answer = dispatch(request, DispatchPolicy())
     assert answer.checks.acyclic and answer.checks.density
     assert len(answer.assignment) == len(request.conflicts)
 
 
+@pytest.mark.parametrize("name", EXAMPLES)
+def test_examples_validate_against_the_request_schema(name: str) -> None:
+    _validator("request.schema.json").validate(_load(SCHEMAS / "examples" / name))
+
+
+def test_request_schema_rejects_what_the_model_rejects() -> None:
+    validator = _validator("request.schema.json")
+    mid = _load(SCHEMAS / "examples" / "mid.json")
+    for broken in (
+        {**mid, "surprise": 1},  # unknown field
+        {**mid, "objective": "fastest"},
+        {**mid, "robots": []},
+    ):
+        assert not validator.is_valid(broken)
+        with pytest.raises(ValueError):
+            ScheduleRequest.model_validate(broken)
+
+
+def test_a_response_validates_against_the_response_schema() -> None:
+    request = ScheduleRequest.model_validate(_load(SCHEMAS / "examples" / "mid.json"))
+    body = dispatch(request, DispatchPolicy()).model_dump(mode="json", by_alias=True)
+    _validator("response.schema.json").validate(body)
+    assert "from" in body["assignment"][0]
+
+
 def test_response_schema_names_from_by_alias() -> None:
-    schema = json.loads((SCHEMAS / "response.schema.json").read_text())
+    schema = _load(SCHEMAS / "response.schema.json")
     assert "from" in schema["$defs"]["AssignmentOut"]["properties"]
