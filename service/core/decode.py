@@ -23,8 +23,13 @@ import numpy as np
 from service.core.assignment import Assignments
 from service.core.cliques import Cliques
 from service.core.problem import Problem
+from service.core.schemas import Objective
 
-__all__ = ["Decoder", "bids_from_ranks"]
+__all__ = ["MONOTONE", "Decoder", "bids_from_ranks", "decode_candidates"]
+
+# Objectives that never get worse when a conflict turns following-type (its wait is
+# weaker); for them the decoder fills every clique budget greedily by score.
+MONOTONE = frozenset({"avg_completion", "max_completion", "avg_delay"})
 
 # Budget of the padding clique in the edge -> clique table: never binds.
 _UNBOUNDED = np.iinfo(np.int64).max // 2
@@ -136,3 +141,21 @@ class Decoder:
     ) -> Assignments:
         """Assignments from ranks (S, V) non-decreasing along each path and scores (S, M)."""
         return Assignments(self.directions(ranks), self.types(scores, threshold))
+
+
+def decode_candidates(
+    decoder: Decoder, bids: np.ndarray, scores: np.ndarray, objective: Objective
+) -> Assignments:
+    """Valid assignments from bids (S, V) > 0 and scores (S, M): S of them, or 2S.
+
+    For a monotone objective every clique budget is filled greedily by score.
+    For the others (sync_completion) filling can hurt, so each row is decoded
+    twice: rows 0..S-1 only take conflicts scoring above 0.5 (the learned
+    probability's threshold), rows S..2S-1 fill the budgets like the monotone case.
+    """
+    ranks = decoder.ranks(bids)
+    a_first = decoder.directions(ranks)
+    if objective in MONOTONE:
+        return Assignments(a_first, decoder.types(scores))
+    following = np.concatenate([decoder.types(scores, 0.5), decoder.types(scores)])
+    return Assignments(np.concatenate([a_first, a_first]), following)

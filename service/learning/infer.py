@@ -11,21 +11,17 @@ import numpy as np
 import torch
 
 from service.core.assignment import Assignments
-from service.core.decode import Decoder
+from service.core.decode import Decoder, decode_candidates
 from service.core.evaluate import Evaluator
 from service.core.schemas import Objective
 from service.learning.features import GraphTensors
 from service.learning.model import GnnVae
 
-__all__ = ["BID_NOISE", "MONOTONE", "best_of", "propose"]
+__all__ = ["BID_NOISE", "best_of", "propose"]
 
 # Largest log-std of the multiplicative bid perturbation (see :func:`propose`);
 # picked on validation problems among 0.3, 0.5 and 1.0.
 BID_NOISE = 0.5
-
-# Objectives that never get worse when a conflict turns following-type (its wait is
-# weaker); for them the decoder fills every clique budget greedily by probability.
-MONOTONE = frozenset({"avg_completion", "max_completion", "avg_delay"})
 
 
 @torch.inference_mode()
@@ -50,18 +46,6 @@ def propose(
     bids, logits = model.sample_heads(h, graph.conf.T.contiguous(), z)  # (S, V), (S, M)
     noise = torch.randn(bids.shape, generator=gen) * (BID_NOISE * ladder)  # (S, V)
     return (bids * noise.exp()).double().numpy(), torch.sigmoid(logits).double().numpy()
-
-
-def decode_candidates(
-    decoder: Decoder, bids: np.ndarray, probs: np.ndarray, objective: Objective
-) -> Assignments:
-    """Valid assignments from bids and probabilities (S, or 2S for non-monotone objectives)."""
-    ranks = decoder.ranks(bids)
-    a_first = decoder.directions(ranks)
-    if objective in MONOTONE:
-        return Assignments(a_first, decoder.types(probs))
-    following = np.concatenate([decoder.types(probs, 0.5), decoder.types(probs)])
-    return Assignments(np.concatenate([a_first, a_first]), following)
 
 
 def best_of(

@@ -23,9 +23,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from service.core.assignment import Assignments
-from service.core.decode import bids_from_ranks
+from service.core.decode import bids_from_ranks, decode_candidates
 from service.learning.features import graph_tensors
-from service.learning.infer import decode_candidates, propose
+from service.learning.infer import propose
 from service.solvers.gnn_vae import DEFAULT_SAMPLES
 from service.solvers.registry import SolveContext, SolverOutput, register
 

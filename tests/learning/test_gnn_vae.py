@@ -14,7 +14,7 @@ from torch_geometric.data import Batch
 
 from service.core.check import check
 from service.core.cliques import find_cliques
-from service.core.decode import Decoder
+from service.core.decode import Decoder, decode_candidates
 from service.core.evaluate import Evaluator
 from service.core.problem import problem_from_request
 from service.core.schemas import OBJECTIVES, ScheduleRequest
@@ -22,7 +22,7 @@ from service.learning.data import DatasetConfig, solve_problem
 from service.learning.dataset import examples_from_records, to_data
 from service.learning.features import graph_tensors
 from service.learning.generate import GeneratorConfig, small_problem, stitched_problem
-from service.learning.infer import best_of, decode_candidates, propose
+from service.learning.infer import best_of, propose
 from service.learning.model import GnnVae, GnnVaeConfig
 from service.learning.store import ModelLoadError, load_all, load_model, save_model
 from service.learning.train import WEIGHTS, loss_terms

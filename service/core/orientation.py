@@ -1,0 +1,314 @@
+"""Searching assignments directly: feasibility of single moves and backtracking enumeration.
+
+The decoder makes valid assignments from continuous bids; tabu search and
+backtracking instead change or fix one conflict at a time, so they need to
+know whether one more decision keeps the assignment valid:
+
+* direction: orienting conflict (a, b) as a -> b closes a cycle exactly when
+  b already reaches a in the node graph (path arcs plus the oriented
+  conflicts); a depth-first search answers it;
+* type: a conflict may turn following-type only if it is not forbidden and
+  every density clique holding it is still under budget.
+
+A partial acyclic orientation always extends (at least one direction of a new
+conflict is safe, and exclusive is always allowed), so backtracking never
+dead-ends: every leaf it reaches is a valid assignment. The kernels are
+numba-compiled because both searches call them thousands of times per request.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from service.core.assignment import Assignments
+from service.core.cliques import Cliques
+from service.core.problem import Problem
+
+__all__ = ["Enumeration", "OrientationGraph"]
+
+UNSET = -1  # orientation of a conflict not decided yet (backtracking)
+
+
+@numba.njit(cache=True)
+def _reaches(
+    src: int,
+    dst: int,
+    orient: np.ndarray,
+    succ: np.ndarray,
+    inc_start: np.ndarray,
+    inc_conf: np.ndarray,
+    conf_a: np.ndarray,
+    conf_b: np.ndarray,
+    seen: np.ndarray,
+    stack: np.ndarray,
+) -> bool:
+    """Whether ``dst`` is reachable from ``src`` (orient (M,) int8: 1 a->b, 0 b->a, -1 unset)."""
+    seen[:] = False
+    seen[src] = True
+    stack[0] = src
+    top = 1
+    while top > 0:
+        top -= 1
+        v = stack[top]
+        if v == dst:
+            return True
+        w = succ[v]
+        if w >= 0 and not seen[w]:
+            seen[w] = True
+            stack[top] = w
+            top += 1
+        for k in range(inc_start[v], inc_start[v + 1]):
+            e = inc_conf[k]
+            o = orient[e]
+            if o == 1 and conf_a[e] == v:
+                w = conf_b[e]
+            elif o == 0 and conf_b[e] == v:
+                w = conf_a[e]
+            else:
+                continue
+            if not seen[w]:
+                seen[w] = True
+                stack[top] = w
+                top += 1
+    return False
+
+
+@numba.njit(cache=True)
+def _budget_left(e: int, counts: np.ndarray, budget: np.ndarray, cq_start, cq_clique) -> bool:
+    """Whether every clique holding conflict ``e`` can take one more following-type conflict."""
+    for k in range(cq_start[e], cq_start[e + 1]):
+        q = cq_clique[k]
+        if counts[q] >= budget[q]:
+            return False
+    return True
+
+
+@numba.njit(cache=True)
+def _moves_feasible(
+    moves: np.ndarray,
+    orient: np.ndarray,
+    following: np.ndarray,
+    counts: np.ndarray,
+    budget: np.ndarray,
+    cq_start: np.ndarray,
+    cq_clique: np.ndarray,
+    succ: np.ndarray,
+    inc_start: np.ndarray,
+    inc_conf: np.ndarray,
+    conf_a: np.ndarray,
+    conf_b: np.ndarray,
+) -> np.ndarray:
+    """(K,) bool: which moves keep the assignment valid (see :meth:`OrientationGraph.feasible`)."""
+    n_nodes = succ.size
+    seen = np.zeros(n_nodes, dtype=np.bool_)
+    stack = np.empty(n_nodes, dtype=np.int64)
+    out = np.zeros(moves.size, dtype=np.bool_)
+    n_conf = orient.size
+    for i in range(moves.size):
+        move = moves[i]
+        if move >= n_conf:  # type flip
+            e = move - n_conf
+            out[i] = following[e] or _budget_left(e, counts, budget, cq_start, cq_clique)
+        else:  # direction flip: the new arc u -> v must not close a cycle without the old arc
+            e = move
+            u, v = (conf_b[e], conf_a[e]) if orient[e] == 1 else (conf_a[e], conf_b[e])
+            old = orient[e]
+            orient[e] = UNSET
+            out[i] = not _reaches(
+                v, u, orient, succ, inc_start, inc_conf, conf_a, conf_b, seen, stack
+            )
+            orient[e] = old
+    return out
+
+
+@numba.njit(cache=True)
+def _enumerate(
+    order: np.ndarray,
+    prefer_a: np.ndarray,
+    may_follow: np.ndarray,
+    follow_first: bool,
+    state: np.ndarray,
+    orient: np.ndarray,
+    following: np.ndarray,
+    counts: np.ndarray,
+    budget: np.ndarray,
+    cq_start: np.ndarray,
+    cq_clique: np.ndarray,
+    succ: np.ndarray,
+    inc_start: np.ndarray,
+    inc_conf: np.ndarray,
+    conf_a: np.ndarray,
+    conf_b: np.ndarray,
+    out_a: np.ndarray,
+    out_f: np.ndarray,
+) -> int:
+    """Depth-first enumeration of valid assignments, resumable; returns the leaves written.
+
+    ``state`` (M + 1,) holds the value index tried at each depth (-1: none) and,
+    in its last slot, the current depth; ``orient``/``following``/``counts``
+    are the partial assignment. Fills ``out_a``/``out_f`` (K, M) with the next
+    leaves, fewer than K only when the tree is exhausted (depth -1).
+    Value k in 0..3 at a conflict: direction = preferred for k < 2, the other
+    for k >= 2; type = ``follow_first`` for even k, the other for odd k.
+    """
+    n_conf = order.size
+    seen = np.zeros(succ.size, dtype=np.bool_)
+    stack = np.empty(succ.size, dtype=np.int64)
+    found = 0
+    depth = state[n_conf]
+    while depth >= 0 and found < out_a.shape[0]:
+        e = order[depth]
+        if state[depth] >= 0:  # undo this depth's current value before trying the next
+            if following[e]:
+                following[e] = False
+                for k in range(cq_start[e], cq_start[e + 1]):
+                    counts[cq_clique[k]] -= 1
+            orient[e] = UNSET
+        k = state[depth] + 1
+        placed = False
+        while k < 4:
+            a_first = prefer_a[e] if k < 2 else not prefer_a[e]
+            follow = follow_first if k % 2 == 0 else not follow_first
+            if follow and not (
+                may_follow[e] and _budget_left(e, counts, budget, cq_start, cq_clique)
+            ):
+                k += 1
+                continue
+            u, v = (conf_a[e], conf_b[e]) if a_first else (conf_b[e], conf_a[e])
+            if _reaches(v, u, orient, succ, inc_start, inc_conf, conf_a, conf_b, seen, stack):
+                k = 4 if k >= 2 else 2  # this direction closes a cycle: skip both its types
+                continue
+            orient[e] = 1 if a_first else 0
+            if follow:
+                following[e] = True
+                for j in range(cq_start[e], cq_start[e + 1]):
+                    counts[cq_clique[j]] += 1
+            placed = True
+            break
+        if not placed:
+            state[depth] = -1
+            depth -= 1
+            continue
+        state[depth] = k
+        if depth == n_conf - 1:
+            for j in range(n_conf):
+                out_a[found, j] = orient[j] == 1
+                out_f[found, j] = following[j]
+            found += 1
+        else:
+            depth += 1
+    state[n_conf] = depth
+    return found
+
+
+@dataclass
+class Enumeration:
+    """A resumable depth-first enumeration of valid assignments (``OrientationGraph.enumerate``)."""
+
+    graph: OrientationGraph
+    order: np.ndarray  # (M,) conflicts in branching order
+    prefer_a: np.ndarray  # (M,) bool, the direction tried first
+    follow_first: bool
+    state: np.ndarray  # (M + 1,) value index per depth, then the current depth
+    orient: np.ndarray  # (M,) int8
+    following: np.ndarray  # (M,) bool
+    counts: np.ndarray  # (Q,) following-type conflicts per clique
+
+    @property
+    def done(self) -> bool:
+        """Whether every valid assignment has been produced."""
+        return bool(self.state[-1] < 0)
+
+    def next(self, count: int) -> Assignments:
+        """Up to ``count`` further leaves, depth first (fewer once the tree is exhausted)."""
+        n_conf = self.order.size
+        if self.done:
+            return Assignments(np.zeros((0, n_conf), dtype=bool), np.zeros((0, n_conf), dtype=bool))
+        if n_conf == 0:  # one valid assignment: the empty one
+            self.state[-1] = -1
+            return Assignments(np.zeros((1, 0), dtype=bool), np.zeros((1, 0), dtype=bool))
+        out_a = np.zeros((count, n_conf), dtype=bool)
+        out_f = np.zeros((count, n_conf), dtype=bool)
+        found = _enumerate(
+            self.order, self.prefer_a, self.graph.may_follow, self.follow_first,
+            self.state, self.orient, self.following, self.counts,
+            *self.graph.kernel_args(), out_a, out_f,
+        )  # fmt: skip
+        return Assignments(out_a[:found], out_f[:found])
+
+
+class OrientationGraph:
+    """One problem's node graph and clique incidences, for move-by-move searches."""
+
+    def __init__(self, problem: Problem, cliques: Cliques) -> None:
+        self.problem = problem
+        self.cliques = cliques
+        n_nodes, n_conf = problem.n_nodes, problem.n_conflicts
+        same = problem.node_robot[1:] == problem.node_robot[:-1]
+        self.succ = np.full(n_nodes, -1, dtype=np.int64)  # (V,) next node on the path, or -1
+        self.succ[:-1][same] = np.arange(1, n_nodes)[same]
+        self.inc_start, self.inc_conf = _csr(
+            np.concatenate([problem.conf_a, problem.conf_b]),
+            np.tile(np.arange(n_conf), 2),
+            n_nodes,
+        )  # node -> incident conflicts
+        self.cq_start, self.cq_clique = _csr(
+            cliques.edge, cliques.clique_of_incidence, n_conf
+        )  # conflict -> its cliques
+        self.may_follow = ~cliques.forbidden()  # (M,)
+
+    def kernel_args(self) -> tuple[np.ndarray, ...]:
+        """The static arrays every kernel takes, in their order."""
+        p = self.problem
+        return (
+            self.cliques.budget.astype(np.int64), self.cq_start, self.cq_clique,
+            self.succ, self.inc_start, self.inc_conf,
+            p.conf_a.astype(np.int64), p.conf_b.astype(np.int64),
+        )  # fmt: skip
+
+    def feasible(self, a_first: np.ndarray, following: np.ndarray, moves: np.ndarray) -> np.ndarray:
+        """Which single moves keep the valid assignment (a_first (M,), following (M,)) valid.
+
+        Move m < M reverses conflict m; move M + m flips conflict m's type.
+        Shapes: moves (K,) int -> (K,) bool.
+        """
+        counts = self.cliques.following_counts(following[None])[0]  # (Q,)
+        return _moves_feasible(
+            np.asarray(moves, dtype=np.int64),
+            a_first.astype(np.int8),
+            following.astype(np.bool_),
+            counts,
+            *self.kernel_args(),
+        )
+
+    def enumerate(self, order: np.ndarray, prefer_a: np.ndarray, follow_first: bool) -> Enumeration:
+        """Depth-first enumeration of every valid assignment (lazily, see :class:`Enumeration`).
+
+        Conflicts are decided in ``order`` (M,); at each, the direction
+        ``prefer_a`` (M,) bool is tried before the other, and following-type
+        before exclusive when ``follow_first``.
+        """
+        n_conf = self.problem.n_conflicts
+        state = np.full(n_conf + 1, -1, dtype=np.int64)
+        state[n_conf] = 0
+        return Enumeration(
+            graph=self,
+            order=np.asarray(order, dtype=np.int64),
+            prefer_a=np.asarray(prefer_a, dtype=np.bool_),
+            follow_first=bool(follow_first),
+            state=state,
+            orient=np.full(n_conf, UNSET, dtype=np.int8),
+            following=np.zeros(n_conf, dtype=np.bool_),
+            counts=np.zeros(self.cliques.budget.size, dtype=np.int64),
+        )
+
+
+def _csr(keys: np.ndarray, values: np.ndarray, n_keys: int) -> tuple[np.ndarray, np.ndarray]:
+    """Group ``values`` by ``keys`` in 0..n_keys-1 -> (start (n_keys+1,), values sorted by key)."""
+    order = np.argsort(keys, kind="stable")
+    start = np.zeros(n_keys + 1, dtype=np.int64)
+    np.cumsum(np.bincount(keys, minlength=n_keys), out=start[1:])
+    return start, np.asarray(values, dtype=np.int64)[order]
