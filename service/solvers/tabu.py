@@ -1,0 +1,97 @@
+"""Tabu search over single-conflict moves, started from FCFS.
+
+A move reverses one conflict's direction or flips its type; only moves that
+keep the assignment valid are considered (:class:`OrientationGraph` checks
+that reversing closes no cycle and that turning following-type fits every
+clique's budget), so every visited assignment is valid. Each iteration
+evaluates a random candidate list of ``moves`` feasible-or-not moves in one
+batched call and takes the best admissible one, even if it is worse than the
+current assignment (that is what lets tabu search leave local optima).
+
+Tabu rule: after a move on conflict e, every move on e is tabu for
+``tenure + U{0..tenure_spread}`` iterations (a randomized tenure avoids
+cycling at a fixed period). Aspiration: a tabu move is admissible anyway when
+it gives a cost below the best found so far. Stops after ``max_iterations``,
+after ``patience`` iterations without a new best, or at the time limit;
+deterministic for a seed when it stops on one of the first two.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from service.core.assignment import Assignments
+from service.core.orientation import OrientationGraph
+from service.solvers.fcfs import fcfs
+from service.solvers.registry import SolveContext, SolverOutput, register
+
+__all__ = ["TabuConfig", "tabu", "tabu_search"]
+
+
+@dataclass(frozen=True)
+class TabuConfig:
+    """Candidate list size, tenure and stopping rules."""
+
+    moves: int = 64  # candidate moves evaluated per iteration
+    tenure: int = 7  # iterations a moved conflict stays tabu, at least
+    tenure_spread: int = 7  # plus a uniform draw from 0..tenure_spread
+    max_iterations: int = 1000
+    patience: int = 200  # iterations without a new best before stopping
+
+
+def _neighbours(current: Assignments, moves: np.ndarray) -> Assignments:
+    """The assignments one move away. Shapes: moves (K,) in 0..2M-1 -> K assignments."""
+    n_conf = current.a_first.shape[1]
+    rows = np.arange(moves.size)
+    a_first = np.repeat(current.a_first, moves.size, axis=0)  # (K, M)
+    following = np.repeat(current.following, moves.size, axis=0)  # (K, M)
+    flip_dir, conflict = moves < n_conf, moves % n_conf
+    a_first[rows[flip_dir], conflict[flip_dir]] ^= True
+    following[rows[~flip_dir], conflict[~flip_dir]] ^= True
+    return Assignments(a_first, following)
+
+
+def tabu_search(
+    ctx: SolveContext, start: Assignments, cfg: TabuConfig = TabuConfig()
+) -> tuple[Assignments, float, int]:
+    """Tabu search from the valid assignment ``start`` -> (best, its cost, iterations run)."""
+    deadline = time.perf_counter() + ctx.time_limit_s
+    rng = np.random.default_rng(ctx.seed)
+    graph = OrientationGraph(ctx.problem, ctx.cliques)
+    evaluate = ctx.evaluator.evaluate
+    n_moves = 2 * ctx.problem.n_conflicts
+    current = best = start
+    best_cost = float(evaluate(start).costs[ctx.objective][0])
+    tabu_until = np.zeros(ctx.problem.n_conflicts, dtype=np.int64)  # (M,) first free iteration
+    stale, it = 0, 0
+    while n_moves and it < cfg.max_iterations and stale < cfg.patience:
+        if time.perf_counter() >= deadline:
+            break
+        it += 1
+        stale += 1
+        moves = rng.choice(n_moves, size=min(cfg.moves, n_moves), replace=False)
+        moves = moves[graph.feasible(current.a_first[0], current.following[0], moves)]
+        if moves.size == 0:
+            continue
+        neighbours = _neighbours(current, moves)
+        costs = evaluate(neighbours).costs[ctx.objective]  # (K,)
+        conflict = moves % ctx.problem.n_conflicts
+        admissible = (tabu_until[conflict] <= it) | (costs < best_cost)
+        if not admissible.any():
+            continue
+        k = int(np.flatnonzero(admissible)[np.argmin(costs[admissible])])
+        current = neighbours.take(k)
+        tabu_until[conflict[k]] = it + cfg.tenure + rng.integers(cfg.tenure_spread + 1)
+        if costs[k] < best_cost:
+            best, best_cost, stale = current, float(costs[k]), 0
+    return best, best_cost, it
+
+
+@register("tabu")
+def tabu(ctx: SolveContext) -> SolverOutput:
+    """Tabu search from the FCFS assignment within the request's time limit."""
+    best, _, iterations = tabu_search(ctx, fcfs(ctx).assignment)
+    return SolverOutput(best, detail=f"{iterations} tabu iterations")

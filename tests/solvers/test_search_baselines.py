@@ -1,0 +1,90 @@
+"""tabu and bbts: valid, never worse than FCFS, deterministic, within the time limit.
+
+On tiny problems the backtracking tree has fewer than 1,000 leaves, so bbts
+sees every valid assignment and must match the brute-force optimum.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+import pytest
+
+from service.core.check import check
+from service.core.problem import problem_from_request
+from service.core.schemas import OBJECTIVES, ScheduleRequest
+from service.learning.generate import stitched_problem
+from service.solvers.bbts import LEAVES, bbts
+from service.solvers.fcfs import fcfs
+from service.solvers.registry import SolveContext, SolverOutput
+from service.solvers.tabu import TabuConfig, tabu, tabu_search
+from tests.reference import feasible_assignments, reference_problem, tiny_request
+
+SOLVERS = {"tabu": tabu, "bbts": bbts}
+
+
+def _ctx(req: dict[str, Any], objective: str, time_limit_s: float = 30.0, seed: int = 0):
+    problem = problem_from_request(ScheduleRequest.model_validate(req))
+    return SolveContext(problem, objective, time_limit_s, seed=seed)
+
+
+def _cost(ctx: SolveContext, out: SolverOutput) -> float:
+    return float(ctx.evaluator.evaluate(out.assignment).costs[ctx.objective][0])
+
+
+@pytest.mark.parametrize("name", SOLVERS)
+@pytest.mark.parametrize("objective", ["avg_completion", "sync_completion"])
+@pytest.mark.parametrize("seed", range(3))
+def test_valid_and_never_worse_than_fcfs(name: str, objective: str, seed: int) -> None:
+    ctx = _ctx(stitched_problem(seed, 25, 3.0), objective)
+    out = SOLVERS[name](ctx)
+    assert check(ctx.problem, ctx.cliques, out.assignment).ok.tolist() == [True]
+    assert _cost(ctx, out) <= _cost(ctx, fcfs(ctx)) + 1e-9
+
+
+@pytest.mark.parametrize("name", SOLVERS)
+def test_deterministic_for_a_seed(name: str) -> None:
+    req = stitched_problem(5, 30, 4.0)
+    first = SOLVERS[name](_ctx(req, "avg_completion", seed=3))
+    again = SOLVERS[name](_ctx(req, "avg_completion", seed=3))
+    assert np.array_equal(first.assignment.a_first, again.assignment.a_first)
+    assert np.array_equal(first.assignment.following, again.assignment.following)
+
+
+@pytest.mark.parametrize("name", SOLVERS)
+def test_time_limit_is_honoured(name: str) -> None:
+    ctx = _ctx(stitched_problem(1, 250, 4.0), "avg_completion", time_limit_s=0.05)
+    SOLVERS[name](_ctx(stitched_problem(0, 10, 2.0), "avg_completion"))  # compile first
+    start = time.perf_counter()
+    out = SOLVERS[name](ctx)
+    assert time.perf_counter() - start < 0.05 + 1.0
+    assert check(ctx.problem, ctx.cliques, out.assignment).ok.tolist() == [True]
+
+
+def test_tabu_improves_a_poor_start_and_counts_its_iterations() -> None:
+    ctx = _ctx(stitched_problem(2, 30, 4.0), "avg_completion")
+    start = fcfs(ctx).assignment
+    cfg = TabuConfig(max_iterations=40, patience=1000)
+    best, cost, iterations = tabu_search(ctx, start, cfg)
+    assert iterations == 40
+    assert cost < _cost(ctx, fcfs(ctx))
+    assert cost == pytest.approx(float(ctx.evaluator.evaluate(best).costs[ctx.objective][0]))
+
+
+def test_bbts_stops_at_its_leaf_budget() -> None:
+    ctx = _ctx(stitched_problem(3, 40, 3.0), "avg_completion")
+    assert bbts(ctx).samples == LEAVES
+
+
+@pytest.mark.parametrize("objective", OBJECTIVES)
+@pytest.mark.parametrize("seed", range(12))
+def test_bbts_finds_the_brute_force_optimum_on_tiny_problems(objective: str, seed: int) -> None:
+    req = tiny_request(seed, objective)
+    candidates = feasible_assignments(reference_problem(req))
+    assert len(candidates) < LEAVES  # the whole tree is enumerated
+    ctx = _ctx(req, objective)
+    out = bbts(ctx)
+    assert out.samples == len(candidates)
+    assert _cost(ctx, out) == pytest.approx(min(c.costs[objective] for c in candidates))
