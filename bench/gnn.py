@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from bench.report import delay_ratio
 from service.core.cliques import find_cliques
 from service.core.decode import Decoder
 from service.core.evaluate import Evaluator
@@ -60,16 +61,6 @@ class Prepared:
     def of(cls, request: dict[str, Any]) -> Prepared:
         req = ScheduleRequest.model_validate(request)
         return cls(problem_from_request(req), req)
-
-
-def delay_ratio(opt: float, cost: float, free: float) -> float:
-    """(opt - free) / (cost - free), 1 at the optimum; NaN where free is no lower bound."""
-    tol = 1e-9 * max(1.0, abs(opt))
-    if cost <= opt + tol:
-        return 1.0
-    if opt < free - tol:  # sync_completion is not monotone: zero delay need not be a bound
-        return float("nan")
-    return (opt - free) / (cost - free)
 
 
 def run_gnn(

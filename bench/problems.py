@@ -60,14 +60,24 @@ def small_set(robots: int, count: int, base_seed: int = 0) -> list[BenchProblem]
 
 
 def stitched_set(
-    robots: int, conflicts_per_robot: float, count: int, base_seed: int = 0
+    robots: int,
+    conflicts_per_robot: float,
+    count: int,
+    base_seed: int = 0,
+    cfg: GeneratorConfig | None = None,
 ) -> list[BenchProblem]:
-    """``count`` stitched problems of ``robots`` robots and about that many conflicts each."""
+    """``count`` stitched problems of ``robots`` robots and about that many conflicts each.
+
+    ``cfg`` sets the parts' sizes (default: the generator's): a fleet smaller
+    than two default parts needs smaller parts, or there is no pair of parts to
+    add conflicts between.
+    """
+    cfg = cfg or GeneratorConfig()
     out = []
     density_key = int(round(conflicts_per_robot * 1000))
     for i in range(count):
         seed = derive_seed(base_seed, _STITCHED, robots, density_key, i)
-        request = stitched_problem(seed, robots, conflicts_per_robot)
+        request = stitched_problem(seed, robots, conflicts_per_robot, cfg=cfg)
         out.append(
             BenchProblem(
                 "stitched", robots, conflicts_per_robot, i, seed, request, *prepare(request)

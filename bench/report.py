@@ -17,6 +17,7 @@ import numpy as np
 
 __all__ = [
     "PERCENTILES",
+    "delay_ratio",
     "format_table",
     "machine_info",
     "plot_solve_times",
@@ -30,6 +31,16 @@ __all__ = [
 PERCENTILES = (50, 95)
 # Versions worth recording next to the figures: the solver and the JIT dominate them.
 _PACKAGES = ("numpy", "numba", "ortools", "pydantic")
+
+
+def delay_ratio(opt: float, cost: float, free: float) -> float:
+    """(opt - free) / (cost - free), 1 at the optimum; NaN where free is no lower bound."""
+    tol = 1e-9 * max(1.0, abs(opt))
+    if cost <= opt + tol:
+        return 1.0
+    if opt < free - tol:  # sync_completion is not monotone: zero delay need not be a bound
+        return float("nan")
+    return (opt - free) / (cost - free)
 
 
 def summarize_solves(runs: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:

@@ -1,6 +1,6 @@
 """Write the JSON Schemas of the v1 request and response, and the mid-size example.
 
-``python schemas/generate.py`` regenerates ``request.schema.json``,
+``python -m schemas.generate`` (from the repository root) regenerates ``request.schema.json``,
 ``response.schema.json`` and ``examples/mid.json`` from the pydantic models and
 the seeded generator; ``tests/test_schemas.py`` fails when they drift.
 """

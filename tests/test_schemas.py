@@ -43,7 +43,7 @@ def test_committed_files_match_the_code() -> None:
     gen = _generator()
     for path, content in gen.documents().items():
         assert path.read_text() == gen.render(content), (
-            f"{path.name} drifted from the code: run `python schemas/generate.py`"
+            f"{path.name} drifted from the code: run `python -m schemas.generate`"
         )
 
 

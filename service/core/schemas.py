@@ -8,7 +8,7 @@ turned into a :class:`service.core.problem.Problem`.
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated, Literal, get_args
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -47,8 +47,19 @@ OBJECTIVES: tuple[Objective, ...] = (
     "sync_completion",
     "avg_delay",
 )
-SolverName = Literal["auto", "exact", "fcfs", "gnn_vae", "gnn_vae_refined"]
-SOLVER_NAMES: tuple[SolverName, ...] = ("auto", "exact", "fcfs", "gnn_vae", "gnn_vae_refined")
+SolverName = Literal[
+    "auto",
+    "exact",
+    "fcfs",
+    "gnn_vae",
+    "gnn_vae_refined",
+    "gnn_vae_exact",
+    "random",
+    "tabu",
+    "cmaes",
+    "bbts",
+]
+SOLVER_NAMES: tuple[SolverName, ...] = get_args(SolverName)
 
 Time = Annotated[float, Field(strict=True, ge=0.0, le=MAX_TIME, allow_inf_nan=False)]
 Count = Annotated[int, Field(strict=True, ge=1)]

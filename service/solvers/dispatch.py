@@ -27,7 +27,17 @@ from service.core.schemas import (
     ScheduleResponse,
     SolverInfoOut,
 )
-from service.solvers import exact, fcfs, gnn_vae, refine  # noqa: F401  (registers the solvers)
+from service.solvers import (  # noqa: F401  (registers the solvers)
+    bbts,
+    cmaes,
+    exact,
+    fcfs,
+    gnn_vae,
+    hybrid,
+    random_search,
+    refine,
+    tabu,
+)
 from service.solvers.registry import SolveContext, SolverOutput, get_solver
 
 if TYPE_CHECKING:
@@ -43,6 +53,7 @@ log = logging.getLogger(__name__)
 FALLBACKS: dict[str, tuple[str, ...]] = {
     "gnn_vae": ("exact", "fcfs"),
     "gnn_vae_refined": ("exact", "fcfs"),
+    "gnn_vae_exact": ("exact", "fcfs"),
 }
 LAST_RESORT = "fcfs"
 

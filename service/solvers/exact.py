@@ -353,6 +353,7 @@ def exact(ctx: SolveContext) -> SolverOutput | None:
         seed=ctx.seed,
         workers=ctx.workers,
         hint=fcfs(ctx).assignment,
+        on_solution=ctx.on_solution,
     )
     if result is None:
         return None

@@ -38,6 +38,9 @@ class SolveContext:
     samples: int | None = None
     workers: int = 1
     models: Mapping[str, StoredModel] = field(default_factory=dict)  # by objective
+    # Sees every improving solution of an anytime solver (CP-SAT) as (wall s, assignment):
+    # lets a benchmark measure how fast a method reaches a cost. None in the service.
+    on_solution: Callable[[float, Assignments], None] | None = None
 
     @cached_property
     def cliques(self) -> Cliques:

@@ -23,8 +23,7 @@ def _graph(req: dict) -> OrientationGraph:
 
 def _keys(a: Assignments) -> list[tuple[tuple[bool, ...], tuple[bool, ...]]]:
     return [
-        (tuple(a.a_first[s].tolist()), tuple(a.following[s].tolist()))
-        for s in range(a.n_samples)
+        (tuple(a.a_first[s].tolist()), tuple(a.following[s].tolist())) for s in range(a.n_samples)
     ]
 
 

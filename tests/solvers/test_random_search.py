@@ -1,0 +1,77 @@
+"""random: valid, deterministic for a seed, within its sample count and time limit."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from service.core.check import check
+from service.core.problem import problem_from_request
+from service.core.schemas import ScheduleRequest
+from service.learning.generate import stitched_problem
+from service.solvers.fcfs import fcfs
+from service.solvers.random_search import DEFAULT_SAMPLES, random_search
+from service.solvers.registry import SolveContext, SolverOutput, get_solver
+
+OBJECTIVES = ("avg_completion", "sync_completion")
+
+
+def _ctx(
+    seed: int, objective: str, samples: int | None = None, time_limit_s: float = 30.0
+) -> SolveContext:
+    request = ScheduleRequest.model_validate(
+        {**stitched_problem(seed, 20, 3.0), "objective": objective}
+    )
+    return SolveContext(
+        problem_from_request(request), objective, time_limit_s, seed=seed, samples=samples
+    )
+
+
+def _cost(ctx: SolveContext, output: SolverOutput) -> float:
+    return float(ctx.evaluator.evaluate(output.assignment).costs[ctx.objective][0])
+
+
+def test_registered_as_random() -> None:
+    assert get_solver("random") is random_search
+
+
+@pytest.mark.parametrize("objective", OBJECTIVES)
+@pytest.mark.parametrize("seed", [0, 1])
+def test_valid_and_deterministic(seed: int, objective: str) -> None:
+    ctx = _ctx(seed, objective)
+    out = random_search(ctx)
+    assert out.samples == DEFAULT_SAMPLES
+    assert out.assignment.n_samples == 1
+    assert check(ctx.problem, ctx.cliques, out.assignment).ok.tolist() == [True]
+    again = random_search(_ctx(seed, objective))
+    assert _cost(ctx, again) == _cost(ctx, out)
+    assert np.array_equal(again.assignment.a_first, out.assignment.a_first)
+    assert np.array_equal(again.assignment.following, out.assignment.following)
+
+
+@pytest.mark.parametrize("objective", OBJECTIVES)
+def test_one_sample_evaluates_one_row(objective: str) -> None:
+    ctx = _ctx(2, objective, samples=1)
+    out = random_search(ctx)
+    assert out.samples == 1
+    assert check(ctx.problem, ctx.cliques, out.assignment).ok.tolist() == [True]
+
+
+def test_more_samples_never_worse() -> None:
+    few = _ctx(3, "avg_completion", samples=64)  # exactly the first batch of the larger run
+    many = _ctx(3, "avg_completion", samples=300)
+    out = random_search(many)
+    assert out.samples == 300
+    assert _cost(many, out) <= _cost(few, random_search(few))
+
+
+def test_time_limit_is_honoured() -> None:
+    ctx = _ctx(0, "sync_completion", samples=10**6, time_limit_s=0.05)
+    ctx.evaluator.evaluate(fcfs(ctx).assignment)  # compile the evaluator outside the clock
+    start = time.perf_counter()
+    out = random_search(ctx)
+    assert time.perf_counter() - start < ctx.time_limit_s + 1.0
+    assert 0 < out.samples < 10**6
+    assert check(ctx.problem, ctx.cliques, out.assignment).ok.tolist() == [True]
