@@ -13,7 +13,7 @@ inference code the service uses, and the mean optimality ratio
 The best epoch by mean normalized gap (cost - opt) / time span is kept; training
 stops early after ``--patience`` epochs without improvement. A checkpoint
 (state dicts only, loaded with ``weights_only=True``) is written every epoch
-and picked up again by the same command.
+and picked up again by the same command (a checkpoint left by other flags is refused, not mixed in).
 """
 
 from __future__ import annotations
@@ -139,7 +139,11 @@ def train(
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
     run_dir.mkdir(parents=True, exist_ok=True)
     ckpt_path = run_dir / "checkpoint.pt"
+    # What a checkpoint must share with the command resuming it (the stopping rules may change).
+    learning = {k: v for k, v in asdict(cfg).items() if k not in ("epochs", "patience")}
+    setup = {"model": asdict(model_cfg), "train": learning, "data": [str(d) for d in data]}
     state: dict[str, Any] = {
+        "setup": setup,
         "epoch": 0,
         "best_gap": float("inf"),
         "best_epoch": -1,
@@ -147,6 +151,12 @@ def train(
         "history": [],
     }
     if ckpt_path.exists():
+        saved = json.loads((run_dir / "state.json").read_text()).get("setup")
+        if saved != setup:
+            raise SystemExit(
+                f"{run_dir} holds a run with another setup ({saved}); resume it with the same "
+                "flags, or train under a new --version"
+            )
         ckpt = torch.load(ckpt_path, weights_only=True)
         model.load_state_dict(ckpt["model"])
         opt.load_state_dict(ckpt["optimizer"])
@@ -180,7 +190,9 @@ def main(argv: list[str] | None = None) -> None:
         "--data", type=Path, nargs="+", required=True, help="dataset folders (trained on together)"
     )
     p.add_argument("--objective", choices=OBJECTIVES, required=True)
-    p.add_argument("--runs", type=Path, default=Path("runs"))
+    p.add_argument(
+        "--runs", type=Path, default=Path("runs"), help="checkpoints go to RUNS/objective/version"
+    )
     p.add_argument("--store", type=Path, default=Path("model_store"))
     p.add_argument("--version", default="v1")
     p.add_argument("--train-problems", type=int, default=None)
@@ -198,7 +210,7 @@ def main(argv: list[str] | None = None) -> None:
     result = train(
         args.data,
         args.objective,
-        args.runs / args.objective,
+        args.runs / args.objective / args.version,
         model_cfg,
         cfg,
         args.train_problems,

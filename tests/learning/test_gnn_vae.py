@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -18,14 +19,14 @@ from service.core.decode import Decoder, decode_candidates
 from service.core.evaluate import Evaluator
 from service.core.problem import problem_from_request
 from service.core.schemas import OBJECTIVES, ScheduleRequest
-from service.learning.data import DatasetConfig, solve_problem
+from service.learning.data import DatasetConfig, build_dataset, solve_problem
 from service.learning.dataset import examples_from_records, to_data
 from service.learning.features import graph_tensors
 from service.learning.generate import GeneratorConfig, small_problem, stitched_problem
 from service.learning.infer import best_of, propose
 from service.learning.model import GnnVae, GnnVaeConfig
 from service.learning.store import ModelLoadError, load_all, load_model, save_model
-from service.learning.train import WEIGHTS, loss_terms
+from service.learning.train import WEIGHTS, TrainConfig, loss_terms, train
 
 TINY = GnnVaeConfig(hidden=16, latent=4, encoder_layers=1, decoder_layers=2, heads=1)
 SHIPPED = Path(__file__).resolve().parents[2] / "model_store"
@@ -137,3 +138,18 @@ def test_shipped_models_load_and_answer(objective: str) -> None:
     )
     assert check(problem, cliques, assignment).ok.all()
     assert np.isfinite(cost)
+
+
+def test_training_resumes_and_refuses_a_checkpoint_of_other_flags(tmp_path: Path) -> None:
+    cfg = DatasetConfig(problems=8, top=2, shard_size=4, generator=GeneratorConfig(max_robots=3))
+    build_dataset(cfg, tmp_path / "data", workers=1)
+    run_dir = tmp_path / "run"
+
+    def run(epochs: int, model_cfg: GnnVaeConfig = TINY) -> dict:
+        train_cfg = TrainConfig(epochs=epochs, batch_size=4, val_samples=2)
+        return train([tmp_path / "data"], "avg_completion", run_dir, model_cfg, train_cfg, None, 2)
+
+    assert run(1)["state"]["epoch"] == 1
+    with pytest.raises(SystemExit, match="another setup"):
+        run(1, replace(TINY, hidden=8))
+    assert run(2)["state"]["epoch"] == 2  # more epochs: resumed, not restarted
