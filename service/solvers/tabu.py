@@ -55,10 +55,16 @@ def _neighbours(current: Assignments, moves: np.ndarray) -> Assignments:
 
 
 def tabu_search(
-    ctx: SolveContext, start: Assignments, cfg: TabuConfig = TabuConfig()
+    ctx: SolveContext,
+    start: Assignments,
+    cfg: TabuConfig = TabuConfig(),
+    budget_s: float | None = None,
 ) -> tuple[Assignments, float, int]:
-    """Tabu search from the valid assignment ``start`` -> (best, its cost, iterations run)."""
-    deadline = time.perf_counter() + ctx.time_limit_s
+    """Tabu search from the valid assignment ``start`` -> (best, its cost, iterations run).
+
+    Runs for at most ``budget_s`` seconds (default: the request's time limit).
+    """
+    deadline = time.perf_counter() + (ctx.time_limit_s if budget_s is None else budget_s)
     rng = np.random.default_rng(ctx.seed)
     graph = OrientationGraph(ctx.problem, ctx.cliques)
     evaluate = ctx.evaluator.evaluate
