@@ -26,10 +26,12 @@ covariance gave the same costs (mean ratio to FCFS 0.935 vs 0.936) in over
 against 0.955 for 0.3, which on 250 robots changes too many conflicts at once
 and barely beats FCFS).
 
-Stops at the evaluation budget, at the time limit (checked each generation)
-or on cma's own termination criteria (on these piecewise-constant costs
-usually flat fitness, once the step is too small to change any decision);
-deterministic for ``ctx.seed`` unless it is the time limit that stops it.
+Stops at the evaluation budget or at the time limit (checked each
+generation). When cma's own termination criteria end a run early (on these
+piecewise-constant costs usually flat fitness, once the step is too small to
+change any decision), it restarts from the best point found with twice the
+population (IPOP-CMA-ES), so the budget is used rather than left idle.
+Deterministic for ``ctx.seed`` unless it is the time limit that stops it.
 cma samples from a private generator seeded with ``ctx.seed``, never from
 numpy's global one, so concurrent requests cannot disturb each other.
 """
@@ -90,26 +92,32 @@ def cmaes_search(
         "seed": np.nan,  # leave numpy's global generator alone: cma samples through randn
         "randn": lambda n, d: rng.standard_normal((n, d)),
         "verbose": -9,  # no output, no log files, no warnings
-        "maxfevals": cfg.max_evaluations,
         "CMA_diagonal": dim > cfg.full_covariance_max_dim,
     }
-    if cfg.popsize is not None:
-        options["popsize"] = cfg.popsize
-    es = cma.CMAEvolutionStrategy(np.zeros(dim), cfg.sigma0, options)
-    evaluated = 1
-    while not es.stop() and time.perf_counter() < deadline:
-        solutions = es.ask()
-        x = np.asarray(solutions)  # (P, V + M)
-        log_factor = np.clip(x[:, :n_nodes], -LOG_BID_LIMIT, LOG_BID_LIMIT)  # (P, V)
-        scores = scores0 + x[:, n_nodes:]  # (P, M)
-        candidates = decode_candidates(ctx.decoder, bids0 * np.exp(log_factor), scores, objective)
-        costs = ctx.evaluator.evaluate(candidates).costs[objective]  # (P,) or (2P,)
-        k = int(np.argmin(costs))
-        if costs[k] < best_cost:
-            best, best_cost = candidates.take(k), float(costs[k])
-        fitness = costs.reshape(-1, len(solutions)).min(axis=0)  # (P,) rows k, k+P share x_k
-        es.tell(solutions, fitness.tolist())
-        evaluated += len(solutions)
+    best_x, evaluated, popsize = np.zeros(dim), 1, cfg.popsize
+    while evaluated < cfg.max_evaluations and time.perf_counter() < deadline:  # restarts
+        if popsize is not None:
+            options["popsize"] = popsize
+        options["maxfevals"] = cfg.max_evaluations - evaluated
+        es = cma.CMAEvolutionStrategy(best_x, cfg.sigma0, options)
+        if es.stop():  # nothing left to run (never expected: maxfevals > 0)
+            break
+        while not es.stop() and time.perf_counter() < deadline:
+            solutions = es.ask()
+            x = np.asarray(solutions)  # (P, V + M)
+            log_factor = np.clip(x[:, :n_nodes], -LOG_BID_LIMIT, LOG_BID_LIMIT)  # (P, V)
+            scores = scores0 + x[:, n_nodes:]  # (P, M)
+            bids = bids0 * np.exp(log_factor)  # (P, V)
+            candidates = decode_candidates(ctx.decoder, bids, scores, objective)
+            costs = ctx.evaluator.evaluate(candidates).costs[objective]  # (P,) or (2P,)
+            k = int(np.argmin(costs))
+            if costs[k] < best_cost:
+                best, best_cost = candidates.take(k), float(costs[k])
+                best_x = x[k % len(solutions)]
+            fitness = costs.reshape(-1, len(solutions)).min(axis=0)  # (P,) rows k, k+P share x_k
+            es.tell(solutions, fitness.tolist())
+            evaluated += len(solutions)
+        popsize = 2 * es.popsize  # IPOP: each restart doubles the population
     return best, best_cost, evaluated
 
 
