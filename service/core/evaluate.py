@@ -204,6 +204,24 @@ class Evaluator:
         costs = {k: np.where(converged, costs[k], np.inf) for k in OBJECTIVES}
         return Evaluation(delay, completion, costs, converged)
 
+    def binding(
+        self, assignments: Assignments, evaluation: Evaluation, sample: int = 0
+    ) -> np.ndarray:
+        """(M,) bool: conflicts whose constraint holds with equality and makes a robot wait.
+
+        These are the conflicts a local search should change first: the delay
+        at the second side's pair enter is exactly what this conflict demands,
+        so reversing it or changing its type is what can lower that delay.
+        """
+        delay = evaluation.event_delay[sample]  # (E+1,)
+        a_first, following = assignments.a_first[sample], assignments.following[sample]
+        slot = 2 * np.arange(a_first.size) + a_first  # (M,) the active slot of each conflict
+        source = np.where(following, self._src_foll[slot], self._src_excl[slot])  # (M,)
+        offset = np.where(following, self._off_foll[slot], self._off_excl[slot])  # (M,)
+        target = delay[self._target[slot]]  # (M,)
+        tol = 1e-9 * max(1.0, float(np.abs(self.problem.tp_time).max(initial=0.0)))
+        return (target > tol) & (np.abs(target - delay[source] - offset) <= tol)
+
     def delays_at(self, evaluation: Evaluation, sample: int, time_points: np.ndarray) -> np.ndarray:
         """Delays D at the given time points of one evaluated sample (same shape)."""
         return evaluation.event_delay[sample, self._tp_event[time_points]]

@@ -11,10 +11,11 @@ import pytest
 from service.core.assignment import Assignments
 from service.core.check import check
 from service.core.cliques import find_cliques
+from service.core.decode import Decoder
 from service.core.evaluate import Evaluation, Evaluator
 from service.core.problem import Problem, problem_from_request
 from service.core.schemas import OBJECTIVES, ScheduleRequest
-from service.learning.generate import small_problem
+from service.learning.generate import small_problem, stitched_problem
 from tests.reference import (
     OBJECTIVE_NAMES,
     costs,
@@ -344,3 +345,25 @@ def test_least_times_equal_brute_force(seed: int) -> None:
         want = costs(ref, times)
         for k in OBJECTIVE_NAMES:
             assert result.costs[k][s] == pytest.approx(want[k], rel=1e-12, abs=1e-9)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_only_binding_conflicts_hold_robots_back(seed: int) -> None:
+    """Dropping a conflict that is not binding changes no completion time; some bind."""
+    request = stitched_problem(seed, 12, 3.0)
+    problem = _problem(request)
+    rng = np.random.default_rng(seed)
+    assignment = Decoder(problem, find_cliques(problem)).decode(
+        rng.exponential(size=(1, problem.n_nodes)) + 1e-3, rng.random((1, problem.n_conflicts))
+    )
+    ev = Evaluator(problem)
+    evaluation = ev.evaluate(assignment)
+    binding = ev.binding(assignment, evaluation)
+    assert binding.any() and not binding.all()
+    for c in np.flatnonzero(~binding).tolist():
+        kept = np.delete(np.arange(problem.n_conflicts), c)
+        without = {**request, "conflicts": [request["conflicts"][k] for k in kept.tolist()]}
+        dropped = Evaluator(_problem(without)).evaluate(
+            Assignments(assignment.a_first[:, kept], assignment.following[:, kept])
+        )
+        np.testing.assert_allclose(dropped.completion, evaluation.completion, rtol=1e-12)
