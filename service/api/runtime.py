@@ -31,7 +31,6 @@ WARMUP_REQUEST = ScheduleRequest.model_validate(
 )
 
 
-WARMUP_GNN_OPTIONS = OptionsIn(solver="gnn_vae", samples=2)
 
 
 @dataclass(eq=False)
@@ -87,10 +86,9 @@ def warm_up(runtime: Runtime) -> None:
         load_models(runtime, runtime.model_store)
     try:
         dispatch(WARMUP_REQUEST, runtime.policy)
-        if runtime.policy.models:  # compile the learned model's path too
-            dispatch(
-                WARMUP_REQUEST.model_copy(update={"options": WARMUP_GNN_OPTIONS}), runtime.policy
-            )
+        # The large-problem path too (the GNN-VAE, the ES and tabu's kernels), or its fallback.
+        large = OptionsIn(solver=runtime.policy.large_solver, samples=2, time_limit_s=10.0)
+        dispatch(WARMUP_REQUEST.model_copy(update={"options": large}), runtime.policy)
     except Exception as exc:
         runtime.detail = f"warm-up failed: {type(exc).__name__}: {exc}"
         log.exception("not ready: warm-up failed")
