@@ -31,8 +31,6 @@ WARMUP_REQUEST = ScheduleRequest.model_validate(
 )
 
 
-
-
 @dataclass(eq=False)
 class Runtime:
     """Per-app state built by the lifespan; ``ready`` turns true once warm-up succeeded."""

@@ -92,16 +92,10 @@ def _moves_feasible(
     orient: np.ndarray,
     following: np.ndarray,
     counts: np.ndarray,
-    budget: np.ndarray,
-    cq_start: np.ndarray,
-    cq_clique: np.ndarray,
-    succ: np.ndarray,
-    inc_start: np.ndarray,
-    inc_conf: np.ndarray,
-    conf_a: np.ndarray,
-    conf_b: np.ndarray,
+    graph: tuple,
 ) -> np.ndarray:
     """(K,) bool: which moves keep the assignment valid (see :meth:`OrientationGraph.feasible`)."""
+    budget, cq_start, cq_clique, succ, inc_start, inc_conf, conf_a, conf_b = graph
     n_nodes = succ.size
     seen = np.zeros(n_nodes, dtype=np.bool_)
     stack = np.empty(n_nodes, dtype=np.int64)
@@ -134,14 +128,7 @@ def _enumerate(
     orient: np.ndarray,
     following: np.ndarray,
     counts: np.ndarray,
-    budget: np.ndarray,
-    cq_start: np.ndarray,
-    cq_clique: np.ndarray,
-    succ: np.ndarray,
-    inc_start: np.ndarray,
-    inc_conf: np.ndarray,
-    conf_a: np.ndarray,
-    conf_b: np.ndarray,
+    graph: tuple,
     out_a: np.ndarray,
     out_f: np.ndarray,
 ) -> int:
@@ -154,6 +141,7 @@ def _enumerate(
     Value k in 0..3 at a conflict: direction = preferred for k < 2, the other
     for k >= 2; type = ``follow_first`` for even k, the other for odd k.
     """
+    budget, cq_start, cq_clique, succ, inc_start, inc_conf, conf_a, conf_b = graph
     n_conf = order.size
     seen = np.zeros(succ.size, dtype=np.bool_)
     stack = np.empty(succ.size, dtype=np.int64)
@@ -235,7 +223,7 @@ class Enumeration:
         found = _enumerate(
             self.order, self.prefer_a, self.graph.may_follow, self.follow_first,
             self.state, self.orient, self.following, self.counts,
-            *self.graph.kernel_args(), out_a, out_f,
+            self.graph.kernel_args(), out_a, out_f,
         )  # fmt: skip
         return Assignments(out_a[:found], out_f[:found])
 
@@ -261,7 +249,7 @@ class OrientationGraph:
         self.may_follow = ~cliques.forbidden()  # (M,)
 
     def kernel_args(self) -> tuple[np.ndarray, ...]:
-        """The static arrays every kernel takes, in their order."""
+        """The static arrays every kernel takes, as one tuple (unpacked inside the kernel)."""
         p = self.problem
         return (
             self.cliques.budget.astype(np.int64), self.cq_start, self.cq_clique,
@@ -281,7 +269,7 @@ class OrientationGraph:
             a_first.astype(np.int8),
             following.astype(np.bool_),
             counts,
-            *self.kernel_args(),
+            self.kernel_args(),
         )
 
     def enumerate(self, order: np.ndarray, prefer_a: np.ndarray, follow_first: bool) -> Enumeration:
