@@ -323,7 +323,9 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--quick", action="store_true", help="a smoke run of about a minute")
     p.add_argument("--store", type=Path, default=Path("model_store"))
     p.add_argument("--small", type=int, default=1000, help="held-out small problems")
-    p.add_argument("--sizes", type=int, nargs="+", default=[25, 50, 100, 250])
+    p.add_argument(
+        "--sizes", type=int, nargs="*", default=[25, 50, 100, 250], help="none: small only"
+    )
     p.add_argument("--per-size", type=int, default=3)
     p.add_argument("--exact-limit", type=float, default=60.0)
     p.add_argument("--large-objective", choices=OBJECTIVES, default="avg_completion")
@@ -367,7 +369,8 @@ def report(rows: list[dict[str, Any]], large: list[dict[str, Any]], out: Path) -
     lines = summarize_small(rows) + [""] + summarize_large(large)
     print("\n".join(lines))
     (out / "tables.txt").write_text("\n".join(lines) + "\n")
-    plot_large(large, out / "large.png")
+    if large:
+        plot_large(large, out / "large.png")
 
 
 if __name__ == "__main__":

@@ -36,7 +36,7 @@ from service.solvers.gnn_vae import DEFAULT_SAMPLES
 from service.solvers.registry import SolveContext, SolverOutput, register
 from service.solvers.tabu import tabu_search
 
-__all__ = ["RefineConfig", "gnn_vae_refined", "refine"]
+__all__ = ["DEFAULT_CONFIG", "RefineConfig", "gnn_vae_refined", "refine"]
 
 
 @dataclass(frozen=True)
@@ -51,12 +51,15 @@ class RefineConfig:
     es_share: float = 0.4  # gnn_vae_refined: share of the budget the ES may use before tabu
 
 
+DEFAULT_CONFIG = RefineConfig()
+
+
 def refine(
     ctx: SolveContext,
     bids: np.ndarray,
     scores: np.ndarray,
     budget_s: float,
-    cfg: RefineConfig = RefineConfig(),
+    cfg: RefineConfig = DEFAULT_CONFIG,
 ) -> tuple[Assignments, float]:
     """Improve the assignment decoded from (bids (V,), scores (M,)) -> (best, its cost)."""
     rng = np.random.default_rng(ctx.seed)
@@ -103,7 +106,7 @@ def gnn_vae_refined(ctx: SolveContext) -> SolverOutput | None:
     candidates = decode_candidates(ctx.decoder, bids, probs, ctx.objective)
     costs = ctx.evaluator.evaluate(candidates).costs[ctx.objective]
     row = int(np.argmin(costs)) % (samples + 1)
-    cfg = RefineConfig()
+    cfg = DEFAULT_CONFIG
     budget = min(cfg.max_seconds, ctx.time_limit_s)
     es_left = cfg.es_share * budget - (time.perf_counter() - start)
     assignment, _ = refine(ctx, bids[row], probs[row], max(es_left, 0.0), cfg)
