@@ -65,7 +65,8 @@ def test_reference_source_and_trace_times() -> None:
 def test_summary_mean_p10_and_unanswered() -> None:
     rows = [
         {"m": "a", "valid": True, "ratio": r, "delay_ratio": r, "gap": 1 - r, "runtime_s": 1.0,
-         "reached_ref": r == 1.0, "cpsat_time_to_cost_s": None}
+         "reached_ref": r == 1.0, "time_to_ref_s": 0.5 if r == 1.0 else None,
+         "cpsat_time_to_cost_s": None}
         for r in np.linspace(0.5, 1.0, 11)
     ]  # fmt: skip
     rows.append({**rows[0], "valid": False, "runtime_s": 2.0})
@@ -75,6 +76,7 @@ def test_summary_mean_p10_and_unanswered() -> None:
     assert s["ratio_p10"] == pytest.approx(0.55)
     assert s["runtime_s_mean"] == pytest.approx(13.0 / 12.0)
     assert s["cpsat_reached"] == 0 and np.isnan(s["cpsat_time_s_mean"])
+    assert s["time_to_ref_s_mean"] == pytest.approx(0.5)
 
 
 def test_quick_defaults_and_flags_override() -> None:
