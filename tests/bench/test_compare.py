@@ -48,6 +48,13 @@ def test_rows_measure_against_the_best_anyone_found() -> None:
     assert not invalid["reached_ref"]
 
 
+def test_earlier_results_count_for_the_reference_without_rows() -> None:
+    rows = finish_rows(_case(10.0), [_result("gnn_vae", 9.5)], [_result("tabu", 9.0)])
+    assert len(rows) == 1
+    assert rows[0]["ref_cost"] == 9.0 and rows[0]["ref_source"] == "tabu"
+    assert not rows[0]["reached_ref"]
+
+
 def test_reference_source_and_trace_times() -> None:
     rows = finish_rows(
         _case(10.0, optimal=True),
