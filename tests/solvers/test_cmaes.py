@@ -8,26 +8,22 @@ import numpy as np
 import pytest
 
 from service.core.check import check
-from service.core.problem import problem_from_request
-from service.core.schemas import ScheduleRequest
 from service.learning.generate import stitched_problem
 from service.solvers.cmaes import CmaesConfig, cmaes, cmaes_search
 from service.solvers.fcfs import fcfs
 from service.solvers.registry import SolveContext, get_solver
+from tests.solvers.common import context, cost
 
 OBJECTIVES = ("avg_completion", "sync_completion")
 SMALL = CmaesConfig(max_evaluations=300)  # a few generations: enough to test, fast
 
 
 def _ctx(seed: int, objective: str, time_limit_s: float = 30.0, n_robots: int = 20) -> SolveContext:
-    request = ScheduleRequest.model_validate(
-        {**stitched_problem(seed, n_robots, 3.0), "objective": objective}
-    )
-    return SolveContext(problem_from_request(request), objective, time_limit_s, seed=seed)
+    return context(stitched_problem(seed, n_robots, 3.0), objective, time_limit_s, seed=seed)
 
 
 def _fcfs_cost(ctx: SolveContext) -> float:
-    return float(ctx.evaluator.evaluate(fcfs(ctx).assignment).costs[ctx.objective][0])
+    return cost(ctx, fcfs(ctx))
 
 
 def test_registered_as_cmaes() -> None:
@@ -38,13 +34,13 @@ def test_registered_as_cmaes() -> None:
 @pytest.mark.parametrize("seed", [0, 1])
 def test_valid_never_worse_than_fcfs_and_deterministic(seed: int, objective: str) -> None:
     ctx = _ctx(seed, objective)
-    best, cost, evaluated = cmaes_search(ctx, SMALL)
+    best, found, evaluated = cmaes_search(ctx, SMALL)
     assert 1 < evaluated <= SMALL.max_evaluations + 100  # the last generation may overrun
     assert check(ctx.problem, ctx.cliques, best).ok.tolist() == [True]
-    assert cost == pytest.approx(float(ctx.evaluator.evaluate(best).costs[objective][0]))
-    assert cost <= _fcfs_cost(ctx)
+    assert found == pytest.approx(float(ctx.evaluator.evaluate(best).costs[objective][0]))
+    assert found <= _fcfs_cost(ctx)
     again, cost_again, evaluated_again = cmaes_search(_ctx(seed, objective), SMALL)
-    assert (cost_again, evaluated_again) == (cost, evaluated)
+    assert (cost_again, evaluated_again) == (found, evaluated)
     assert np.array_equal(again.a_first, best.a_first)
     assert np.array_equal(again.following, best.following)
 
@@ -52,9 +48,9 @@ def test_valid_never_worse_than_fcfs_and_deterministic(seed: int, objective: str
 def test_full_covariance_below_the_threshold() -> None:
     ctx = _ctx(0, "avg_completion", n_robots=5)  # a dozen dimensions
     assert ctx.problem.n_nodes + ctx.problem.n_conflicts <= SMALL.full_covariance_max_dim
-    best, cost, _ = cmaes_search(ctx, SMALL)
+    best, found, _ = cmaes_search(ctx, SMALL)
     assert check(ctx.problem, ctx.cliques, best).ok.tolist() == [True]
-    assert cost <= _fcfs_cost(ctx)
+    assert found <= _fcfs_cost(ctx)
 
 
 def test_solver_reports_its_samples() -> None:
@@ -69,7 +65,7 @@ def test_time_limit_is_honoured(objective: str) -> None:
     ctx = _ctx(3, objective, time_limit_s=0.05, n_robots=80)
     _fcfs_cost(ctx)  # compile the evaluator outside the clock
     start = time.perf_counter()
-    best, cost, _ = cmaes_search(ctx, CmaesConfig(max_evaluations=10**9))
+    best, found, _ = cmaes_search(ctx, CmaesConfig(max_evaluations=10**9))
     assert time.perf_counter() - start < ctx.time_limit_s + 1.0
     assert check(ctx.problem, ctx.cliques, best).ok.tolist() == [True]
-    assert cost <= _fcfs_cost(ctx)
+    assert found <= _fcfs_cost(ctx)

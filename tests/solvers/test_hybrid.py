@@ -7,14 +7,13 @@ from pathlib import Path
 import pytest
 
 from service.core.check import check
-from service.core.problem import problem_from_request
-from service.core.schemas import ScheduleRequest
 from service.learning.generate import stitched_problem
 from service.learning.store import load_all
 from service.solvers.exact import exact
 from service.solvers.hybrid import gnn_vae_exact
 from service.solvers.refine import gnn_vae_refined
-from service.solvers.registry import SolveContext, SolverOutput
+from service.solvers.registry import SolveContext
+from tests.solvers.common import context, cost
 
 STORE = Path(__file__).resolve().parents[2] / "model_store"
 
@@ -27,12 +26,7 @@ def models() -> dict:
 
 
 def _ctx(robots: int, density: float, limit: float, models: dict) -> SolveContext:
-    req = ScheduleRequest.model_validate(stitched_problem(7, robots, density))
-    return SolveContext(problem_from_request(req), "avg_completion", limit, models=models)
-
-
-def _cost(ctx: SolveContext, out: SolverOutput) -> float:
-    return float(ctx.evaluator.evaluate(out.assignment).costs[ctx.objective][0])
+    return context(stitched_problem(7, robots, density), "avg_completion", limit, models=models)
 
 
 def test_proves_the_optimum_where_cp_sat_can(models: dict) -> None:
@@ -42,7 +36,7 @@ def test_proves_the_optimum_where_cp_sat_can(models: dict) -> None:
     assert check(ctx.problem, ctx.cliques, out.assignment).ok.all()
     plain = exact(_ctx(10, 2.0, 30.0, models))
     assert plain.optimal
-    assert _cost(ctx, out) == pytest.approx(_cost(ctx, plain))
+    assert cost(ctx, out) == pytest.approx(cost(ctx, plain))
 
 
 def test_never_worse_than_the_refined_answer_it_starts_from(models: dict) -> None:
@@ -50,7 +44,7 @@ def test_never_worse_than_the_refined_answer_it_starts_from(models: dict) -> Non
     out = gnn_vae_exact(ctx)
     assert check(ctx.problem, ctx.cliques, out.assignment).ok.all()
     refined = gnn_vae_refined(_ctx(30, 4.0, 3.0, models))  # ends by patience, well within 1 s
-    assert _cost(ctx, out) <= _cost(ctx, refined) + 1e-9
+    assert cost(ctx, out) <= cost(ctx, refined) + 1e-9
 
 
 def test_without_a_model_it_has_no_answer() -> None:

@@ -8,12 +8,11 @@ import numpy as np
 import pytest
 
 from service.core.check import check
-from service.core.problem import problem_from_request
-from service.core.schemas import ScheduleRequest
 from service.learning.generate import stitched_problem
 from service.solvers.fcfs import fcfs
 from service.solvers.random_search import DEFAULT_SAMPLES, random_search
-from service.solvers.registry import SolveContext, SolverOutput, get_solver
+from service.solvers.registry import SolveContext, get_solver
+from tests.solvers.common import context, cost
 
 OBJECTIVES = ("avg_completion", "sync_completion")
 
@@ -21,16 +20,9 @@ OBJECTIVES = ("avg_completion", "sync_completion")
 def _ctx(
     seed: int, objective: str, samples: int | None = None, time_limit_s: float = 30.0
 ) -> SolveContext:
-    request = ScheduleRequest.model_validate(
-        {**stitched_problem(seed, 20, 3.0), "objective": objective}
+    return context(
+        stitched_problem(seed, 20, 3.0), objective, time_limit_s, seed=seed, samples=samples
     )
-    return SolveContext(
-        problem_from_request(request), objective, time_limit_s, seed=seed, samples=samples
-    )
-
-
-def _cost(ctx: SolveContext, output: SolverOutput) -> float:
-    return float(ctx.evaluator.evaluate(output.assignment).costs[ctx.objective][0])
 
 
 def test_registered_as_random() -> None:
@@ -46,7 +38,7 @@ def test_valid_and_deterministic(seed: int, objective: str) -> None:
     assert out.assignment.n_samples == 1
     assert check(ctx.problem, ctx.cliques, out.assignment).ok.tolist() == [True]
     again = random_search(_ctx(seed, objective))
-    assert _cost(ctx, again) == _cost(ctx, out)
+    assert cost(ctx, again) == cost(ctx, out)
     assert np.array_equal(again.assignment.a_first, out.assignment.a_first)
     assert np.array_equal(again.assignment.following, out.assignment.following)
 
@@ -64,7 +56,7 @@ def test_more_samples_never_worse() -> None:
     many = _ctx(3, "avg_completion", samples=300)
     out = random_search(many)
     assert out.samples == 300
-    assert _cost(many, out) <= _cost(few, random_search(few))
+    assert cost(many, out) <= cost(few, random_search(few))
 
 
 def test_time_limit_is_honoured() -> None:

@@ -7,14 +7,13 @@ from pathlib import Path
 import pytest
 
 from service.core.check import check
-from service.core.problem import problem_from_request
-from service.core.schemas import ScheduleRequest
 from service.learning.generate import stitched_problem
 from service.learning.store import load_all
 from service.solvers.fcfs import fcfs
 from service.solvers.gnn_vae import gnn_vae
 from service.solvers.refine import gnn_vae_refined
 from service.solvers.registry import SolveContext
+from tests.solvers.common import context, cost
 
 STORE = Path(__file__).resolve().parents[2] / "model_store"
 
@@ -27,16 +26,7 @@ def models() -> dict:
 
 
 def _ctx(seed: int, objective: str, models: dict, time_limit_s: float = 30.0) -> SolveContext:
-    request = ScheduleRequest.model_validate(
-        {**stitched_problem(seed, 30, 3.0), "objective": objective}
-    )
-    return SolveContext(
-        problem_from_request(request), objective, time_limit_s, seed=1, models=models
-    )
-
-
-def _cost(ctx: SolveContext, output) -> float:
-    return float(ctx.evaluator.evaluate(output.assignment).costs[ctx.objective][0])
+    return context(stitched_problem(seed, 30, 3.0), objective, time_limit_s, seed=1, models=models)
 
 
 @pytest.mark.parametrize("objective", ["avg_completion", "sync_completion"])
@@ -46,9 +36,9 @@ def test_refined_is_valid_and_never_worse(seed: int, objective: str, models: dic
     out = gnn_vae_refined(ctx)
     assert out is not None and out.model is not None
     assert check(ctx.problem, ctx.cliques, out.assignment).ok.all()
-    cost = _cost(ctx, out)
-    assert cost <= _cost(ctx, fcfs(ctx)) + 1e-9
-    assert cost <= _cost(ctx, gnn_vae(ctx)) + 1e-9
+    refined = cost(ctx, out)
+    assert refined <= cost(ctx, fcfs(ctx)) + 1e-9
+    assert refined <= cost(ctx, gnn_vae(ctx)) + 1e-9
 
 
 def test_refined_is_deterministic_when_tabu_ends_by_patience(models: dict) -> None:

@@ -13,25 +13,19 @@ import numpy as np
 import pytest
 
 from service.core.check import check
-from service.core.problem import problem_from_request
-from service.core.schemas import OBJECTIVES, ScheduleRequest
+from service.core.schemas import OBJECTIVES
 from service.learning.generate import stitched_problem
 from service.solvers.bbts import LEAVES, bbts
 from service.solvers.fcfs import fcfs
-from service.solvers.registry import SolveContext, SolverOutput
 from service.solvers.tabu import TabuConfig, tabu, tabu_search
 from tests.reference import feasible_assignments, reference_problem, tiny_request
+from tests.solvers.common import context, cost
 
 SOLVERS = {"tabu": tabu, "bbts": bbts}
 
 
 def _ctx(req: dict[str, Any], objective: str, time_limit_s: float = 30.0, seed: int = 0):
-    problem = problem_from_request(ScheduleRequest.model_validate(req))
-    return SolveContext(problem, objective, time_limit_s, seed=seed)
-
-
-def _cost(ctx: SolveContext, out: SolverOutput) -> float:
-    return float(ctx.evaluator.evaluate(out.assignment).costs[ctx.objective][0])
+    return context(req, objective, time_limit_s, seed=seed)
 
 
 @pytest.mark.parametrize("name", SOLVERS)
@@ -41,7 +35,7 @@ def test_valid_and_never_worse_than_fcfs(name: str, objective: str, seed: int) -
     ctx = _ctx(stitched_problem(seed, 25, 3.0), objective)
     out = SOLVERS[name](ctx)
     assert check(ctx.problem, ctx.cliques, out.assignment).ok.tolist() == [True]
-    assert _cost(ctx, out) <= _cost(ctx, fcfs(ctx)) + 1e-9
+    assert cost(ctx, out) <= cost(ctx, fcfs(ctx)) + 1e-9
 
 
 @pytest.mark.parametrize("name", SOLVERS)
@@ -67,10 +61,10 @@ def test_tabu_improves_a_poor_start_and_counts_its_iterations() -> None:
     ctx = _ctx(stitched_problem(2, 30, 4.0), "avg_completion")
     start = fcfs(ctx).assignment
     cfg = TabuConfig(max_iterations=40, patience=1000)
-    best, cost, iterations = tabu_search(ctx, start, cfg)
+    best, found, iterations = tabu_search(ctx, start, cfg)
     assert iterations == 40
-    assert cost < _cost(ctx, fcfs(ctx))
-    assert cost == pytest.approx(float(ctx.evaluator.evaluate(best).costs[ctx.objective][0]))
+    assert found < cost(ctx, fcfs(ctx))
+    assert found == pytest.approx(float(ctx.evaluator.evaluate(best).costs[ctx.objective][0]))
 
 
 def test_bbts_stops_at_its_leaf_budget() -> None:
@@ -87,4 +81,4 @@ def test_bbts_finds_the_brute_force_optimum_on_tiny_problems(objective: str, see
     ctx = _ctx(req, objective)
     out = bbts(ctx)
     assert out.samples == len(candidates)
-    assert _cost(ctx, out) == pytest.approx(min(c.costs[objective] for c in candidates))
+    assert cost(ctx, out) == pytest.approx(min(c.costs[objective] for c in candidates))
