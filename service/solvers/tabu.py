@@ -106,14 +106,15 @@ def tabu_search(
         if moves.size == 0:
             continue
         neighbours = _neighbours(current, moves)
-        costs = evaluate(neighbours).costs[ctx.objective]  # (K,)
+        evaluation = evaluate(neighbours)
+        costs = evaluation.costs[ctx.objective]  # (K,)
         conflict = moves % ctx.problem.n_conflicts
         admissible = (tabu_until[conflict] <= it) | (costs < best_cost)
         if not admissible.any():
             continue
         k = int(np.flatnonzero(admissible)[np.argmin(costs[admissible])])
         current = neighbours.take(k)
-        binding = np.flatnonzero(ctx.evaluator.binding(current, evaluate(current)))
+        binding = np.flatnonzero(ctx.evaluator.binding(neighbours, evaluation, k))
         tabu_until[conflict[k]] = it + cfg.tenure + rng.integers(cfg.tenure_spread + 1)
         if costs[k] < best_cost:
             best, best_cost, stale = current, float(costs[k]), 0
