@@ -51,11 +51,16 @@ def _bits(text: str) -> np.ndarray:
     return np.frombuffer(text.encode(), dtype=np.uint8) == ord("1")
 
 
-def examples_from_records(records: Iterable[dict[str, Any]], objective: Objective) -> list[Example]:
-    """Examples of every record that has at least one proven target for ``objective``."""
+def examples_from_records(
+    records: Iterable[dict[str, Any]], objective: Objective, max_targets: int | None = None
+) -> list[Example]:
+    """Examples of every record that has at least one proven target for ``objective``.
+
+    Each keeps its ``max_targets`` best targets (all the record has, if None).
+    """
     out = []
     for rec in records:
-        targets = rec["targets"][objective]
+        targets = rec["targets"][objective][:max_targets]
         if not targets:
             continue
         request = ScheduleRequest.model_validate({**rec["request"], "objective": objective})

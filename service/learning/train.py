@@ -54,6 +54,7 @@ class TrainConfig:
     patience: int = 6
     val_samples: int = 20
     seed: int = 0
+    targets: int = 10  # best exact assignments per problem trained on (the data has up to --top)
 
 
 def loss_terms(model: GnnVae, batch: Batch) -> dict[str, torch.Tensor]:
@@ -133,7 +134,7 @@ def train(
     train_ex, val_ex = [], []
     for path in data:  # the last n_val problems of every dataset are held out
         records = list(iter_problems(path, None if n_train is None else n_train + n_val))
-        train_ex += examples_from_records(records[:-n_val], objective)
+        train_ex += examples_from_records(records[:-n_val], objective, cfg.targets)
         val_ex += examples_from_records(records[-n_val:], objective)
     model = GnnVae(model_cfg)
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
