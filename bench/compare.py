@@ -3,8 +3,9 @@
 ``python -m bench.compare [--quick]`` runs each method of the solver registry
 (random, fcfs, tabu, cmaes, bbts, gnn_vae, gnn_vae_refined, gnn_vae_exact and
 exact) on stitched problems of 5 to 250 robots at a sparse and a dense
-conflict density, each with the same time limit, and a sample-count ablation
-of the GNN-VAE. It writes, under ``--out``:
+conflict density and on held-out problems of the training generator (2-8
+robots, set ``small``), each with the same time limit, and a sample-count
+ablation of the GNN-VAE. It writes, under ``--out``:
 
 * ``tables.md``: per objective, density and robot count, for every method the
   mean and 10th-percentile optimality ratio (reference / cost), the mean delay
@@ -36,7 +37,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from bench.problems import BenchProblem, stitched_set
+from bench.problems import BenchProblem, small_set, stitched_set
 from bench.report import delay_ratio, format_table, machine_info, write_csv, write_json
 from service.core.assignment import Assignments
 from service.core.check import check
@@ -62,6 +63,7 @@ METHODS = (
     "exact",
 )
 DENSITIES = {"sparse": 2.0, "dense": 4.0}  # conflicts per robot
+SMALL = "small"  # the set name of the training generator's (held-out) problems
 # Fleets smaller than two default parts (2-8 robots) are stitched from 2-3 robot parts.
 SMALL_FLEET = GeneratorConfig(min_robots=2, max_robots=3)
 REL_TOL = 1e-9  # a cost within this relative distance of the reference counts as reaching it
@@ -76,6 +78,8 @@ class Config:
     sizes: tuple[int, ...] = (5, 10, 25, 50, 100, 250)
     densities: tuple[str, ...] = ("sparse", "dense")
     per_size: int = 3
+    small_sizes: tuple[int, ...] = (4, 8)  # robots of held-out training-generator problems
+    small_per_size: int = 20
     methods: tuple[str, ...] = METHODS
     time_limit_s: float = 5.0
     ref_limit_s: float = 60.0
@@ -90,6 +94,8 @@ class Config:
 QUICK = Config(
     sizes=(5, 10, 25),
     per_size=1,
+    small_sizes=(4,),
+    small_per_size=2,
     time_limit_s=1.0,
     ref_limit_s=5.0,
     ablation_sizes=(25,),
@@ -112,13 +118,19 @@ class Case:
 
 
 def problem_sets(cfg: Config) -> list[tuple[str, BenchProblem]]:
-    """(density name, problem) for every size and density, deterministic from the base seed."""
+    """(density name, problem) for every size and density, deterministic from the base seed.
+
+    The held-out problems of the training generator come last, under the name
+    ``SMALL`` (their seeds never coincide with the training data's).
+    """
     out = []
     for density in cfg.densities:
         for n in cfg.sizes:
             parts = SMALL_FLEET if n < 10 else GeneratorConfig()
             problems = stitched_set(n, DENSITIES[density], cfg.per_size, cfg.base_seed, parts)
             out += [(density, bp) for bp in problems]
+    for n in cfg.small_sizes:
+        out += [(SMALL, bp) for bp in small_set(n, cfg.small_per_size, cfg.base_seed)]
     return out
 
 
@@ -431,13 +443,20 @@ def plot_comparison(summary: Sequence[dict[str, Any]], objective: str, path: Pat
                 ax = axes[row, col]
                 ax.plot([s["robots"] for s in sel], [s[key] for s in sel], "o-", label=method)
                 ax.set(xscale="log", xlabel="robots", ylabel=label)
-                ax.set_title(f"{objective}, {density} ({DENSITIES[density]:g} conflicts/robot)")
+                ax.set_title(f"{objective}, {_set_label(density)}")
                 ax.grid(True, which="both", alpha=0.3)
         axes[2, col].set_yscale("log")
     axes[0, 0].legend(fontsize="small")
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
+
+
+def _set_label(density: str) -> str:
+    """A problem set's name for plot titles."""
+    if density == SMALL:
+        return "small (training generator, held out)"
+    return f"{density} ({DENSITIES[density]:g} conflicts/robot)"
 
 
 def plot_ablation(summary: Sequence[dict[str, Any]], path: Path) -> None:
@@ -509,6 +528,10 @@ def _parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     p.add_argument("--sizes", type=int, nargs="+", help="robot counts")
     p.add_argument("--densities", nargs="+", choices=tuple(DENSITIES))
     p.add_argument("--per-size", type=int, help="problems per robot count and density")
+    p.add_argument(
+        "--small-sizes", type=int, nargs="*", help="robots of held-out small problems (none: skip)"
+    )
+    p.add_argument("--small-per-size", type=int, help="held-out small problems per robot count")
     p.add_argument("--methods", nargs="+", choices=METHODS)
     p.add_argument("--time-limit", type=float, dest="time_limit_s", help="seconds per method")
     p.add_argument("--ref-limit", type=float, dest="ref_limit_s", help="reference CP-SAT seconds")

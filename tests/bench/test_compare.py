@@ -90,12 +90,14 @@ def test_quick_defaults_and_flags_override() -> None:
     assert config_from_args(_parse_args(["--quick"])) == QUICK
     cfg = config_from_args(_parse_args(["--sizes", "5", "250", "--methods", "fcfs", "tabu"]))
     assert cfg == replace(Config(), sizes=(5, 250), methods=("fcfs", "tabu"))
+    assert config_from_args(_parse_args(["--small-sizes"])).small_sizes == ()
 
 
 def test_tiny_end_to_end_run_writes_everything(tmp_path: Path) -> None:
     args = ["--sizes", "5", "--densities", "dense", "--per-size", "2", "--time-limit", "0.5",
             "--ref-limit", "1", "--methods", "fcfs", "bbts", "gnn_vae", "gnn_vae_exact",
             "--ablation-sizes", "5", "--ablation-samples", "1", "4",
+            "--small-sizes", "3", "--small-per-size", "1",
             "--out", str(tmp_path / "out"), "--cache", str(tmp_path / "cache")]  # fmt: skip
     assert main(args) == 0
     out = tmp_path / "out"
@@ -104,7 +106,8 @@ def test_tiny_end_to_end_run_writes_everything(tmp_path: Path) -> None:
     assert (out / "compare-avg_completion.png").stat().st_size > 0
     assert (out / "ablation.png").stat().st_size > 0
     results = json.loads((out / "results.json").read_text())
-    assert len(results["rows"]) == 2 * 4 and len(results["ablation"]) == 2 * 2
+    assert len(results["rows"]) == (2 + 1) * 4 and len(results["ablation"]) == 2 * 2
+    assert {r["density"] for r in results["rows"]} == {"dense", "small"}
     assert all(r["valid"] and r["ratio"] <= 1.0 + 1e-12 for r in results["rows"])
-    assert len(json.loads(next((tmp_path / "cache").iterdir()).read_text())) == 2
+    assert len(json.loads(next((tmp_path / "cache").iterdir()).read_text())) == 3
     assert main([*args, "--summarize"]) == 0  # re-renders from the raw results alone
