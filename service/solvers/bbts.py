@@ -37,6 +37,8 @@ def bbts(ctx: SolveContext) -> SolverOutput:
     best, best_cost, seen = None, np.inf, 0
     while seen < LEAVES and not search.done:
         leaves = search.next(min(BATCH, LEAVES - seen))
+        if leaves.n_samples == 0:  # the last batch ended exactly at the tree's last leaf
+            break
         seen += leaves.n_samples
         costs = ctx.evaluator.evaluate(leaves).costs[ctx.objective]  # (K,)
         k = int(np.argmin(costs))

@@ -82,3 +82,15 @@ def test_bbts_finds_the_brute_force_optimum_on_tiny_problems(objective: str, see
     out = bbts(ctx)
     assert out.samples == len(candidates)
     assert cost(ctx, out) == pytest.approx(min(c.costs[objective] for c in candidates))
+
+
+def test_bbts_when_the_tree_ends_exactly_at_a_batch_boundary(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    req = tiny_request(5)
+    leaves = len(feasible_assignments(reference_problem(req)))
+    monkeypatch.setattr("service.solvers.bbts.BATCH", leaves)
+    ctx = _ctx(req, "avg_completion")
+    out = bbts(ctx)
+    assert out.samples == leaves
+    assert check(ctx.problem, ctx.cliques, out.assignment).ok.tolist() == [True]
