@@ -111,7 +111,7 @@ def dispatch(request: ScheduleRequest, policy: DispatchPolicy) -> ScheduleRespon
         fallback_from=None if used == name else name,
         detail=output.detail
         if used == name
-        else f"{name} gave no answer (no solution in time, or no model loaded)",
+        else f"{name} gave no answer (no solution in time, no model loaded, or it failed)",
     )
     checked = ChecksOut(acyclic=bool(checks.acyclic[0]), density=bool(checks.density[0]))
     return _render(request, ctx, output, info, checked)
@@ -120,12 +120,21 @@ def dispatch(request: ScheduleRequest, policy: DispatchPolicy) -> ScheduleRespon
 def _first_valid_answer(ctx: SolveContext, name: str) -> tuple[str, SolverOutput, CheckResult]:
     """Run ``name``, then its fallbacks, until one answer passes the checker.
 
+    A solver that raises is logged and skipped like one without an answer;
+    only the last resort (FCFS, which cannot fail on a validated problem) may raise.
+
     Raises:
         InvalidAnswerError: not even the last resort gave a valid answer (a bug).
     """
     chain = dict.fromkeys((name, *FALLBACKS.get(name, ()), LAST_RESORT))
     for candidate in chain:
-        output = get_solver(candidate)(ctx)
+        try:
+            output = get_solver(candidate)(ctx)
+        except Exception:  # a solver bug must cost the request its answer quality, not a 500
+            if candidate == LAST_RESORT:
+                raise
+            log.exception("solver %s failed; trying its fallback", candidate)
+            continue
         if output is None:
             continue
         checks = check(ctx.problem, ctx.cliques, output.assignment)

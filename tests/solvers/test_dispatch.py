@@ -63,6 +63,16 @@ def test_no_answer_falls_back_to_fcfs(monkeypatch: pytest.MonkeyPatch) -> None:
     assert response.checks.acyclic and response.checks.density
 
 
+def test_a_failing_solver_falls_back(monkeypatch: pytest.MonkeyPatch, caplog) -> None:
+    def broken(ctx: SolveContext) -> SolverOutput:
+        raise ValueError("a bug")
+
+    monkeypatch.setitem(registry._REGISTRY, "exact", broken)
+    response = dispatch(_request(small_problem(1), solver="exact"), POLICY)
+    assert response.solver.name == "fcfs" and response.solver.fallback_from == "exact"
+    assert "solver exact failed" in caplog.text
+
+
 def test_invalid_answer_is_never_returned(monkeypatch: pytest.MonkeyPatch) -> None:
     def cyclic(ctx: SolveContext) -> SolverOutput:
         # The trap's free node cycle: time-feasible, but not acyclic.
