@@ -192,7 +192,7 @@ class Evaluator:
         n_samples = assignments.n_samples
         # Slot 2c is active when b passes first, slot 2c+1 when a does.
         active = np.stack([~assignments.a_first, assignments.a_first], axis=2)
-        active = active.reshape(n_samples, -1)  # (S, 2M)
+        active = active.reshape(n_samples, 2 * problem.n_conflicts)  # (S, 2M), S may be 0
         following = np.repeat(assignments.following, 2, axis=1)  # (S, 2M)
         source = np.where(following, self._src_foll, self._src_excl)  # (S, 2M)
         offset = np.where(following, self._off_foll, self._off_excl)  # (S, 2M)

@@ -367,3 +367,11 @@ def test_only_binding_conflicts_hold_robots_back(seed: int) -> None:
             Assignments(assignment.a_first[:, kept], assignment.following[:, kept])
         )
         np.testing.assert_allclose(dropped.completion, evaluation.completion, rtol=1e-12)
+
+
+def test_an_empty_batch_has_empty_results() -> None:
+    problem = _problem(small_problem(3))
+    empty = np.zeros((0, problem.n_conflicts), dtype=bool)
+    result = Evaluator(problem).evaluate(Assignments(empty, empty))
+    assert result.completion.shape == (0, problem.n_robots)
+    assert all(result.costs[k].shape == (0,) for k in OBJECTIVES)
