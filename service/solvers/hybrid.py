@@ -43,9 +43,12 @@ def gnn_vae_exact(ctx: SolveContext) -> SolverOutput | None:
     )
     if result is None:
         return replace(learned, detail="CP-SAT found no solution in time")
-    costs = ctx.evaluator.evaluate(result.assignment).costs[ctx.objective][0]
+    found = ctx.evaluator.evaluate(result.assignment).costs[ctx.objective][0]
     hinted = ctx.evaluator.evaluate(learned.assignment).costs[ctx.objective][0]
-    if costs > hinted:  # the hint may be lost to CP-SAT's time scaling; keep the better
+    if found > hinted:  # the hint may be lost to CP-SAT's time scaling; keep the better
         return replace(learned, detail="CP-SAT did not improve the hint")
-    detail = "proven optimal by CP-SAT" if result.optimal else "improved by CP-SAT"
+    if result.optimal:
+        detail = "proven optimal by CP-SAT"
+    else:
+        detail = "improved by CP-SAT" if found < hinted else "CP-SAT kept the hint, unproven"
     return replace(learned, assignment=result.assignment, optimal=result.optimal, detail=detail)
