@@ -91,7 +91,7 @@ def cmaes_search(
     options: dict[str, object] = {
         "seed": np.nan,  # leave numpy's global generator alone: cma samples through randn
         "randn": lambda n, d: rng.standard_normal((n, d)),
-        "verbose": -9,  # no output, no log files, no warnings
+        "verbose": -9,  # no output, no log files (one diagnostic UserWarning remains: pyproject)
         "CMA_diagonal": dim > cfg.full_covariance_max_dim,
     }
     best_x, evaluated, popsize = np.zeros(dim), 1, cfg.popsize
