@@ -16,7 +16,7 @@ import time
 
 import numpy as np
 
-from service.core.orientation import OrientationGraph
+from service.solvers.fcfs import fcfs_priorities
 from service.solvers.registry import SolveContext, SolverOutput, register
 
 __all__ = ["BATCH", "LEAVES", "bbts"]
@@ -30,10 +30,12 @@ def bbts(ctx: SolveContext) -> SolverOutput:
     """Cheapest of the first ``LEAVES`` valid assignments, within the request's time limit."""
     deadline = time.perf_counter() + ctx.time_limit_s
     problem = ctx.problem
-    order = np.lexsort((np.arange(problem.n_conflicts), problem.pair_enter.min(axis=1)))
-    ranks = problem.node_enter  # (V,) FCFS: who is expected first passes first
-    prefer_a = ctx.decoder.directions(ranks[None])[0]  # (M,)
-    search = OrientationGraph(problem, ctx.cliques).enumerate(order, prefer_a, follow_first=True)
+    ranks, scores = fcfs_priorities(problem)
+    order = np.lexsort((np.arange(problem.n_conflicts), -scores))  # earliest conflict first
+    prefer_a = ctx.decoder.directions(ranks[None])[
+        0
+    ]  # (M,) FCFS: who is expected first passes first
+    search = ctx.orientation.enumerate(order, prefer_a, follow_first=True)
     best, best_cost, seen = None, np.inf, 0
     while seen < LEAVES and not search.done:
         leaves = search.next(min(BATCH, LEAVES - seen))

@@ -46,7 +46,7 @@ import numpy as np
 
 from service.core.assignment import Assignments
 from service.core.decode import bids_from_ranks, decode_candidates
-from service.solvers.fcfs import fcfs
+from service.solvers.fcfs import fcfs, fcfs_priorities
 from service.solvers.registry import SolveContext, SolverOutput, register
 
 __all__ = ["CmaesConfig", "cmaes", "cmaes_search"]
@@ -69,8 +69,8 @@ class CmaesConfig:
 def _start(ctx: SolveContext) -> tuple[np.ndarray, np.ndarray]:
     """FCFS bids (V,) > 0 and FCFS following scores normalised to [0, 1] (M,), M > 0."""
     problem = ctx.problem
-    bids = bids_from_ranks(problem, problem.node_enter + 1.0)  # node_enter >= 0
-    scores = -problem.pair_enter.min(axis=1)  # earlier conflicts first, as in FCFS
+    ranks, scores = fcfs_priorities(problem)
+    bids = bids_from_ranks(problem, ranks + 1.0)  # ranks >= 0; bids must be positive
     span = np.ptp(scores)
     return bids, (scores - scores.min()) / span if span > 0 else np.zeros_like(scores)
 

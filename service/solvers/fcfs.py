@@ -9,16 +9,25 @@ through the shared decoder, so density limits hold by construction.
 
 from __future__ import annotations
 
+import numpy as np
+
+from service.core.problem import Problem
 from service.solvers.registry import SolveContext, SolverOutput, register
 
-__all__ = ["fcfs"]
+__all__ = ["fcfs", "fcfs_priorities"]
+
+
+def fcfs_priorities(problem: Problem) -> tuple[np.ndarray, np.ndarray]:
+    """FCFS's node ranks (V,) (expected enter times, increasing along each path) and
+    conflict scores (M,) (minus the earliest pair enter: earlier conflicts first).
+
+    The searches that start from FCFS (cmaes, bbts) read their start here.
+    """
+    return problem.node_enter, -problem.pair_enter.min(axis=1)
 
 
 @register("fcfs")
 def fcfs(ctx: SolveContext) -> SolverOutput:
     """FCFS assignment of ``ctx.problem``; deterministic, ignores seed and time limit."""
-    problem = ctx.problem
-    ranks = problem.node_enter[None, :]  # (1, V) strictly increasing along each path
-    first_enter = problem.pair_enter.min(axis=1)  # (M,)
-    scores = -first_enter[None, :]  # (1, M) earlier conflicts get following-type first
-    return SolverOutput(ctx.decoder.decode_ranks(ranks, scores), optimal=False)
+    ranks, scores = fcfs_priorities(ctx.problem)
+    return SolverOutput(ctx.decoder.decode_ranks(ranks[None], scores[None]), optimal=False)

@@ -18,6 +18,7 @@ from service.core.assignment import Assignments
 from service.core.cliques import Cliques, find_cliques
 from service.core.decode import Decoder
 from service.core.evaluate import Evaluator
+from service.core.orientation import OrientationGraph
 from service.core.problem import Problem
 from service.core.schemas import Objective
 
@@ -53,6 +54,10 @@ class SolveContext:
     @cached_property
     def decoder(self) -> Decoder:
         return Decoder(self.problem, self.cliques)
+
+    @cached_property
+    def orientation(self) -> OrientationGraph:
+        return OrientationGraph(self.problem, self.cliques)
 
 
 @dataclass

@@ -29,7 +29,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from service.core.assignment import Assignments
-from service.core.orientation import OrientationGraph
 from service.solvers.fcfs import fcfs
 from service.solvers.registry import SolveContext, SolverOutput, register
 
@@ -87,7 +86,7 @@ def tabu_search(
     """
     deadline = time.perf_counter() + (ctx.time_limit_s if budget_s is None else budget_s)
     rng = np.random.default_rng(ctx.seed)
-    graph = OrientationGraph(ctx.problem, ctx.cliques)
+    graph = ctx.orientation
     evaluate = ctx.evaluator.evaluate
     n_moves = 2 * ctx.problem.n_conflicts
     current = best = start
