@@ -17,7 +17,7 @@ Node features (NODE_DIM = 10), per node v of robot r, in units:
   (0 if first), 4 gap to the next node (0 if last), 5 1 / density,
   6 density >= 2, 7 first node, 8 last node, 9 conflicts at v / 8 (clipped to 1).
 Edge features (EDGE_DIM = 10), for an arc u -> v, in units:
-  0 precedence arc (the model may add each one reversed, marked -1 here), 1 conflict arc,
+  0 precedence arc, 1 conflict arc,
   2 pe_v - pe_u (> 0: u's side arrives first), 3 px_u - pe_v (v's wait if u goes
   first, exclusive), 4 px_v - pe_u (u's wait if v goes first), 5 pe_v - enter_v
   and 6 pe_u - enter_u (where the pair section starts inside each node),

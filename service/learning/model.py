@@ -7,12 +7,6 @@ conflict), whose first layer is split as A u + B z so a batch of S samples
 costs one (S, N, H) add and a (S, N, H) -> (S, N) projection instead of S
 message-passing passes (at 250 robots and S = 100 that is the difference
 between ~10^5 and ~10^3 graph nodes through the GATv2 layers).
-
-With ``reverse_arcs = 1`` every GATv2 stack also passes messages backwards
-along each path (v + 1 -> v, marked -1 in the precedence column). Published
-graphs have forward arcs only, so a node never hears of the conflicts after it
-on its own path, yet its bid shifts the ranks of all of them: the first
-node's bid sets the robot's priority everywhere.
 """
 
 from __future__ import annotations
@@ -26,7 +20,7 @@ from torch_geometric.nn import GATv2Conv, global_max_pool
 
 from service.learning.features import EDGE_DIM, NODE_DIM
 
-__all__ = ["GnnVae", "GnnVaeConfig", "LatentHead", "chain_ranks", "with_reverse_precedence"]
+__all__ = ["GnnVae", "GnnVaeConfig", "LatentHead", "chain_ranks"]
 
 # Smallest bid: keeps ranks strictly increasing along paths.
 MIN_BID = 1e-3
@@ -41,26 +35,9 @@ class GnnVaeConfig:
     encoder_layers: int = 3
     decoder_layers: int = 4
     heads: int = 2
-    reverse_arcs: int = 0  # 1: add backward precedence arcs (models before v5: 0)
 
     def to_dict(self) -> dict[str, int]:
         return asdict(self)
-
-
-def with_reverse_precedence(
-    edge_index: torch.Tensor, edge_attr: torch.Tensor
-) -> tuple[torch.Tensor, torch.Tensor]:
-    """The arcs plus a reversed copy of every precedence arc, flagged -1 in column 0.
-
-    Shapes: edge_index (2, E), edge_attr (E, EDGE_DIM) -> (2, E + Ep), (E + Ep, EDGE_DIM).
-    """
-    forward = edge_attr[:, 0] > 0.5  # (E,) precedence arcs
-    reverse_attr = edge_attr[forward].clone()
-    reverse_attr[:, 0] = -1.0
-    return (
-        torch.cat([edge_index, edge_index[:, forward].flip(0)], dim=1),
-        torch.cat([edge_attr, reverse_attr]),
-    )
 
 
 class GatStack(nn.Module):
@@ -69,10 +46,9 @@ class GatStack(nn.Module):
     Shapes: x (V, NODE_DIM), edge_index (2, E), edge_attr (E, EDGE_DIM) -> (V, hidden).
     """
 
-    def __init__(self, hidden: int, layers: int, heads: int, reverse_arcs: bool = False) -> None:
+    def __init__(self, hidden: int, layers: int, heads: int) -> None:
         super().__init__()
         self.hidden, self.layers, self.heads = hidden, layers, heads
-        self.reverse_arcs = reverse_arcs
         self.inp = nn.Linear(NODE_DIM, hidden)
         self.convs = nn.ModuleList(
             GATv2Conv(hidden, hidden, heads=heads, concat=False, edge_dim=EDGE_DIM)
@@ -90,8 +66,6 @@ class GatStack(nn.Module):
     def forward(
         self, x: torch.Tensor, edge_index: torch.Tensor, edge_attr: torch.Tensor
     ) -> torch.Tensor:
-        if self.reverse_arcs:
-            edge_index, edge_attr = with_reverse_precedence(edge_index, edge_attr)
         h = F.relu(self.inp(x))
         for conv, norm in zip(self.convs, self.norms, strict=True):
             h = norm(h + F.relu(conv(h, edge_index, edge_attr)))
@@ -99,8 +73,7 @@ class GatStack(nn.Module):
 
     def __repr__(self) -> str:
         return (
-            f"{type(self).__name__}(hidden={self.hidden}, layers={self.layers}, "
-            f"heads={self.heads}, reverse_arcs={self.reverse_arcs})"
+            f"{type(self).__name__}(hidden={self.hidden}, layers={self.layers}, heads={self.heads})"
         )
 
 
@@ -143,11 +116,10 @@ class GnnVae(nn.Module):
         super().__init__()
         self.config = config
         h, z = config.hidden, config.latent
-        reverse = bool(config.reverse_arcs)
-        self.encoder = GatStack(h, config.encoder_layers, config.heads, reverse)
+        self.encoder = GatStack(h, config.encoder_layers, config.heads)
         self.to_mu = nn.Linear(h, z)
         self.to_logstd = nn.Linear(h, z)
-        self.trunk = GatStack(h, config.decoder_layers, config.heads, reverse)
+        self.trunk = GatStack(h, config.decoder_layers, config.heads)
         self.bid_head = LatentHead(h, z, h)
         self.edge_head = LatentHead(2 * h, z, h)
 

@@ -21,10 +21,10 @@ from service.core.problem import problem_from_request
 from service.core.schemas import OBJECTIVES, ScheduleRequest
 from service.learning.data import DatasetConfig, build_dataset, solve_problem
 from service.learning.dataset import examples_from_records, to_data
-from service.learning.features import EDGE_DIM, NODE_DIM, graph_tensors
+from service.learning.features import graph_tensors
 from service.learning.generate import GeneratorConfig, small_problem, stitched_problem
 from service.learning.infer import best_of, propose
-from service.learning.model import GatStack, GnnVae, GnnVaeConfig, with_reverse_precedence
+from service.learning.model import GnnVae, GnnVaeConfig
 from service.learning.store import ModelLoadError, load_all, load_model, save_model
 from service.learning.train import WEIGHTS, TrainConfig, loss_terms, train
 
@@ -43,14 +43,12 @@ def records() -> list[dict]:
     return [solve_problem(cfg, i) for i in range(cfg.problems)]
 
 
-@pytest.mark.parametrize("reverse_arcs", [0, 1])
-def test_store_round_trip_and_corruption(tmp_path: Path, reverse_arcs: int) -> None:
+def test_store_round_trip_and_corruption(tmp_path: Path) -> None:
     torch.manual_seed(0)
-    model = GnnVae(replace(TINY, reverse_arcs=reverse_arcs))
+    model = GnnVae(TINY)
     save_model(model, tmp_path, "avg_completion", "t1", {"validation": {"ratio": 0.5}})
     loaded = load_model(tmp_path, "avg_completion")
     assert loaded.version == "t1" and loaded.name == "gnn_vae/avg_completion/t1"
-    assert loaded.model.config == model.config
     for key, value in model.state_dict().items():
         assert torch.equal(value, loaded.model.state_dict()[key])
     weights = tmp_path / "avg_completion" / "t1" / "model.safetensors"
@@ -69,32 +67,6 @@ def test_config_mismatch_is_a_load_error(tmp_path: Path) -> None:
     meta_path.write_text(json.dumps(meta))
     with pytest.raises(ModelLoadError):
         load_model(tmp_path, "avg_delay")
-
-
-def test_reverse_arcs_copy_every_precedence_arc_backwards() -> None:
-    problem, cliques = _problem(small_problem(3))
-    graph = graph_tensors(problem, cliques)
-    index, attr = with_reverse_precedence(graph.edge_index, graph.edge_attr)
-    added = index.shape[1] - graph.edge_index.shape[1]
-    assert added == graph.n_precedence
-    assert torch.equal(index[:, -added:], graph.edge_index[:, :added].flip(0))
-    assert (attr[-added:, 0] == -1).all() and torch.equal(attr[-added:, 1:], attr[:added, 1:])
-
-
-@pytest.mark.parametrize("reverse_arcs", [False, True])
-def test_only_reverse_arcs_let_a_path_start_hear_its_end(reverse_arcs: bool) -> None:
-    torch.manual_seed(0)
-    stack = GatStack(hidden=8, layers=2, heads=1, reverse_arcs=reverse_arcs)
-    edge_index = torch.tensor([[0, 1], [1, 2]])  # one path 0 -> 1 -> 2
-    edge_attr = torch.zeros(2, EDGE_DIM)
-    edge_attr[:, 0] = 1.0
-    x = torch.rand(3, NODE_DIM)
-    moved = x.clone()
-    moved[2] += 1.0
-    changed = not torch.allclose(
-        stack(x, edge_index, edge_attr)[0], stack(moved, edge_index, edge_attr)[0]
-    )
-    assert changed == reverse_arcs
 
 
 def test_training_steps_lower_the_loss(records: list[dict]) -> None:
