@@ -11,11 +11,15 @@ Graph: one vertex per node. Directed edges: precedence v -> v+1 along every
 robot's path, then for conflict c the two arcs a -> b (index 2c of the conflict
 block) and b -> a (index 2c+1).
 
-Node features (NODE_DIM = 10), per node v of robot r, in units:
+Node features (NODE_DIM = 12), per node v of robot r, in units:
   0 duration, 1 log1p(travel before v on its path: enter - T_r(1)),
   2 log1p(travel left after v: T_r(C) - exit), 3 gap from the previous node
   (0 if first), 4 gap to the next node (0 if last), 5 1 / density,
-  6 density >= 2, 7 first node, 8 last node, 9 conflicts at v / 8 (clipped to 1).
+  6 density >= 2, 7 first node, 8 last node, 9 conflicts at v / 8 (clipped to 1),
+  10 T_r(C) - mean over robots of T(C), 11 T_r(C) - max over robots of T(C)
+  (where r's delay-free finish stands in the fleet: global facts that message
+  passing over a few hops cannot gather, and that sync and max completion
+  depend on; models before v5 read columns 0-9 only, see GnnVaeConfig).
 Edge features (EDGE_DIM = 10), for an arc u -> v, in units:
   0 precedence arc, 1 conflict arc,
   2 pe_v - pe_u (> 0: u's side arrives first), 3 px_u - pe_v (v's wait if u goes
@@ -40,7 +44,7 @@ from service.core.problem import Problem
 
 __all__ = ["EDGE_DIM", "NODE_DIM", "GraphTensors", "assignment_edge_features", "graph_tensors"]
 
-NODE_DIM = 10
+NODE_DIM = 12
 EDGE_DIM = 10
 ASSIGN_COLS = slice(8, 10)
 CLIP = 10.0  # relative times beyond 10 time units carry no extra information
@@ -79,6 +83,7 @@ def _node_features(problem: Problem, unit: float) -> np.ndarray:
     gap_after = np.zeros(problem.n_nodes)
     gap_after[~last] = gap_before[np.flatnonzero(~last) + 1]
     degree = np.bincount(problem.conf_nodes.ravel(), minlength=problem.n_nodes)
+    robot_free = problem.free_time()  # (R,) T_r(C)
     x = np.stack(
         [
             (problem.node_exit - problem.node_enter) / unit,
@@ -91,6 +96,8 @@ def _node_features(problem: Problem, unit: float) -> np.ndarray:
             first,
             last,
             np.minimum(degree / 8.0, 1.0),
+            (free - robot_free.mean()) / unit,
+            (free - robot_free.max()) / unit,
         ],
         axis=1,
     )

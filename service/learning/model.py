@@ -35,21 +35,23 @@ class GnnVaeConfig:
     encoder_layers: int = 3
     decoder_layers: int = 4
     heads: int = 2
+    node_features: int = NODE_DIM  # leading node columns read (models before v5: 10)
 
     def to_dict(self) -> dict[str, int]:
         return asdict(self)
 
 
 class GatStack(nn.Module):
-    """Input projection then residual GATv2 layers with edge features.
+    """Input projection of the first ``features`` node columns, then residual GATv2 layers.
 
     Shapes: x (V, NODE_DIM), edge_index (2, E), edge_attr (E, EDGE_DIM) -> (V, hidden).
     """
 
-    def __init__(self, hidden: int, layers: int, heads: int) -> None:
+    def __init__(self, hidden: int, layers: int, heads: int, features: int = NODE_DIM) -> None:
         super().__init__()
         self.hidden, self.layers, self.heads = hidden, layers, heads
-        self.inp = nn.Linear(NODE_DIM, hidden)
+        self.features = features
+        self.inp = nn.Linear(features, hidden)
         self.convs = nn.ModuleList(
             GATv2Conv(hidden, hidden, heads=heads, concat=False, edge_dim=EDGE_DIM)
             for _ in range(layers)
@@ -66,14 +68,15 @@ class GatStack(nn.Module):
     def forward(
         self, x: torch.Tensor, edge_index: torch.Tensor, edge_attr: torch.Tensor
     ) -> torch.Tensor:
-        h = F.relu(self.inp(x))
+        h = F.relu(self.inp(x[:, : self.features]))
         for conv, norm in zip(self.convs, self.norms, strict=True):
             h = norm(h + F.relu(conv(h, edge_index, edge_attr)))
         return h
 
     def __repr__(self) -> str:
         return (
-            f"{type(self).__name__}(hidden={self.hidden}, layers={self.layers}, heads={self.heads})"
+            f"{type(self).__name__}(hidden={self.hidden}, layers={self.layers}, "
+            f"heads={self.heads}, features={self.features})"
         )
 
 
@@ -116,10 +119,10 @@ class GnnVae(nn.Module):
         super().__init__()
         self.config = config
         h, z = config.hidden, config.latent
-        self.encoder = GatStack(h, config.encoder_layers, config.heads)
+        self.encoder = GatStack(h, config.encoder_layers, config.heads, config.node_features)
         self.to_mu = nn.Linear(h, z)
         self.to_logstd = nn.Linear(h, z)
-        self.trunk = GatStack(h, config.decoder_layers, config.heads)
+        self.trunk = GatStack(h, config.decoder_layers, config.heads, config.node_features)
         self.bid_head = LatentHead(h, z, h)
         self.edge_head = LatentHead(2 * h, z, h)
 

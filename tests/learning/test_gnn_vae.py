@@ -21,7 +21,7 @@ from service.core.problem import problem_from_request
 from service.core.schemas import OBJECTIVES, ScheduleRequest
 from service.learning.data import DatasetConfig, build_dataset, solve_problem
 from service.learning.dataset import examples_from_records, to_data
-from service.learning.features import graph_tensors
+from service.learning.features import NODE_DIM, graph_tensors
 from service.learning.generate import GeneratorConfig, small_problem, stitched_problem
 from service.learning.infer import best_of, propose
 from service.learning.model import GnnVae, GnnVaeConfig
@@ -86,6 +86,19 @@ def test_training_steps_lower_the_loss(records: list[dict]) -> None:
         total().backward()
         opt.step()
     assert total().item() < 0.8 * before
+
+
+@pytest.mark.parametrize("node_features", [10, NODE_DIM])
+def test_a_model_reads_only_its_own_node_columns(node_features: int) -> None:
+    problem, cliques = _problem(small_problem(9))
+    graph = graph_tensors(problem, cliques)
+    torch.manual_seed(0)
+    model = GnnVae(replace(TINY, node_features=node_features)).eval()
+    x = graph.x.clone()
+    x[:, 10:] += 1.0  # the fleet-level columns added in v5
+    h = model.embed(graph.x, graph.edge_index, graph.edge_attr)
+    moved = model.embed(x, graph.edge_index, graph.edge_attr)
+    assert torch.allclose(h, moved) == (node_features == 10)
 
 
 @settings(max_examples=25, deadline=None)
