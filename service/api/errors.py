@@ -22,9 +22,10 @@ from typing import Any, ClassVar
 from fastapi import Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
-from starlette.types import ASGIApp, Message, Receive, Scope, Send
+from starlette.types import Message, Receive, Scope, Send
 
 from service.api.metrics import Metrics
+from service.api.middleware import HttpMiddleware
 from service.core.problem import ProblemError
 
 __all__ = [
@@ -115,21 +116,14 @@ async def handle_validation_error(request: Request, exc: RequestValidationError)
     return await handle_api_error(request, InvalidRequest.from_validation(exc))
 
 
-class CatchAllMiddleware:
+class CatchAllMiddleware(HttpMiddleware):
     """Turns any exception no handler rendered into a logged 503.
 
     Starlette's own catch-all (``ServerErrorMiddleware``) answers 500 and re-raises;
     this sits inside it so no exception ever reaches it while a response can still be sent.
     """
 
-    def __init__(self, app: ASGIApp, metrics: Metrics) -> None:
-        self.app = app
-        self.metrics = metrics
-
-    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
-        if scope["type"] != "http":
-            await self.app(scope, receive, send)
-            return
+    async def handle_http(self, scope: Scope, receive: Receive, send: Send) -> None:
         started = False
 
         async def send_tracked(message: Message) -> None:

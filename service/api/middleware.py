@@ -8,7 +8,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from service.api.metrics import Metrics
 
-__all__ = ["PROBE_ROUTES", "RequestMetricsMiddleware"]
+__all__ = ["PROBE_ROUTES", "HttpMiddleware", "RequestMetricsMiddleware"]
 
 # Routes kept out of the request metrics: scraped every few seconds, they would drown the rest.
 PROBE_ROUTES = frozenset({"/healthz", "/readyz", "/metrics"})
@@ -16,8 +16,11 @@ PROBE_ROUTES = frozenset({"/healthz", "/readyz", "/metrics"})
 UNMATCHED = "<unmatched>"
 
 
-class RequestMetricsMiddleware:
-    """Count every request and its latency by route template, method and status."""
+class HttpMiddleware:
+    """Plain ASGI middleware with the service's metrics that acts on HTTP requests only.
+
+    Subclasses implement :meth:`handle_http`; lifespan and other scopes pass straight through.
+    """
 
     def __init__(self, app: ASGIApp, metrics: Metrics) -> None:
         self.app = app
@@ -27,6 +30,16 @@ class RequestMetricsMiddleware:
         if scope["type"] != "http":
             await self.app(scope, receive, send)
             return
+        await self.handle_http(scope, receive, send)
+
+    async def handle_http(self, scope: Scope, receive: Receive, send: Send) -> None:
+        raise NotImplementedError
+
+
+class RequestMetricsMiddleware(HttpMiddleware):
+    """Count every request and its latency by route template, method and status."""
+
+    async def handle_http(self, scope: Scope, receive: Receive, send: Send) -> None:
         status = 500
 
         async def send_with_status(message: Message) -> None:
