@@ -77,13 +77,13 @@ def _node_features(problem: Problem, unit: float) -> np.ndarray:
     last = np.zeros(problem.n_nodes, dtype=bool)
     last[problem.robot_start[1:] - 1] = True
     start = problem.tp_time[problem.tp_start[:-1]][problem.node_robot]  # (V,) T_r(1)
-    free = problem.free_time()[problem.node_robot]  # (V,) T_r(C)
+    robot_free = problem.free_time()  # (R,) T_r(C)
+    free = robot_free[problem.node_robot]  # (V,) T_r(C) of the node's robot
     gap_before = np.zeros(problem.n_nodes)
     gap_before[~first] = (problem.node_enter[1:] - problem.node_exit[:-1])[~first[1:]]
     gap_after = np.zeros(problem.n_nodes)
     gap_after[~last] = gap_before[np.flatnonzero(~last) + 1]
     degree = np.bincount(problem.conf_nodes.ravel(), minlength=problem.n_nodes)
-    robot_free = problem.free_time()  # (R,) T_r(C)
     x = np.stack(
         [
             (problem.node_exit - problem.node_enter) / unit,
