@@ -13,6 +13,7 @@ from typing import Annotated, Literal, get_args
 from pydantic import BaseModel, ConfigDict, Field
 
 __all__ = [
+    "MAX_COUNT",
     "MAX_TIME",
     "MAX_TIME_LIMIT_S",
     "OBJECTIVES",
@@ -39,6 +40,9 @@ __all__ = [
 MAX_TIME = 1e9
 # The longest solve a request may ask for (options.time_limit_s), in seconds.
 MAX_TIME_LIMIT_S = 300.0
+# The largest density or max_robots: far above any fleet the size caps admit (5000 robots),
+# so it never binds a real problem, and its budget rho (rho + 1) / 2 stays far inside int64.
+MAX_COUNT = 1_000_000
 
 Objective = Literal["avg_completion", "max_completion", "sync_completion", "avg_delay"]
 OBJECTIVES: tuple[Objective, ...] = (
@@ -62,7 +66,7 @@ SolverName = Literal[
 SOLVER_NAMES: tuple[SolverName, ...] = get_args(SolverName)
 
 Time = Annotated[float, Field(strict=True, ge=0.0, le=MAX_TIME, allow_inf_nan=False)]
-Count = Annotated[int, Field(strict=True, ge=1)]
+Count = Annotated[int, Field(strict=True, ge=1, le=MAX_COUNT)]
 Id = Annotated[str, Field(min_length=1, max_length=200)]
 
 

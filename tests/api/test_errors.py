@@ -130,6 +130,16 @@ INVALID: dict[str, tuple[Edit, str]] = {
     "samples 1001": (put("options", "samples", 1001), "body.options.samples: Input should be less"),
     "time limit 0": (put("options", "time_limit_s", 0), "body.options.time_limit_s: Input should"),
     "time limit 301": (put("options", "time_limit_s", 301), "body.options.time_limit_s: Input"),
+    # integers beyond 64 bits (numpy cannot hold them): refused by the wire models' bounds
+    "density 2^63": (put(*NODE, "density", 2**63), f"{NODE_LOC}.density: Input should be less"),
+    "max_robots 2^63": (
+        put("density_limits", [{"nodes": ["r1/b", "r2/b"], "max_robots": 2**63}]),
+        "density_limits.0.max_robots: Input should be less",
+    ),
+    "seed 2^63": (put("options", "seed", 2**63), "body.options.seed: Input should be less"),
+    "samples 2^63": (put("options", "samples", 2**63), "body.options.samples: Input should"),
+    "time limit 2^63": (put("options", "time_limit_s", 2**63), "body.options.time_limit_s"),
+    "time 10^400": (put(*NODE, "exit", 10**400), f"{NODE_LOC}.exit: Input should be a valid"),
 }
 
 
