@@ -1,8 +1,9 @@
 """The one constraint checker: every answer of every solver passes through it.
 
 It is deliberately independent of the decoder: acyclicity is checked by a
-topological sort (stdlib ``graphlib``) of the node graph, and density by
-counting following-type conflicts per clique.
+topological sort (stdlib ``graphlib``) of the node graph, density by counting
+following-type conflicts per clique, and fixed directions by comparing each
+fixed conflict's direction with its ``first``.
 """
 
 from __future__ import annotations
@@ -21,15 +22,19 @@ __all__ = ["CheckResult", "check", "is_acyclic"]
 
 @dataclass(frozen=True)
 class CheckResult:
-    """Per-sample results. Shapes: acyclic (S,) bool, density (S,) bool."""
+    """Per-sample results. Shapes: acyclic, density, forced (S,) bool each.
+
+    ``forced``: the assignment agrees with every fixed direction.
+    """
 
     acyclic: np.ndarray
     density: np.ndarray
+    forced: np.ndarray
 
     @property
     def ok(self) -> np.ndarray:
-        """(S,) bool: both constraints hold."""
-        return self.acyclic & self.density
+        """(S,) bool: every constraint holds."""
+        return self.acyclic & self.density & self.forced
 
 
 def is_acyclic(problem: Problem, first: np.ndarray, second: np.ndarray) -> bool:
@@ -48,7 +53,7 @@ def is_acyclic(problem: Problem, first: np.ndarray, second: np.ndarray) -> bool:
 
 
 def check(problem: Problem, cliques: Cliques, assignments: Assignments) -> CheckResult:
-    """Check node-level acyclicity and every clique's following budget."""
+    """Check node-level acyclicity, every clique's following budget and fixed directions."""
     acyclic = np.array(
         [
             is_acyclic(problem, *assignments.from_to(problem, s))
@@ -58,4 +63,7 @@ def check(problem: Problem, cliques: Cliques, assignments: Assignments) -> Check
     )
     counts = cliques.following_counts(assignments.following)  # (S, Q)
     density = np.all(counts <= cliques.budget[None, :], axis=1)
-    return CheckResult(acyclic, density)
+    fixed = np.flatnonzero(problem.forced)  # (F,)
+    wanted = problem.forced[fixed] > 0  # (F,) side a first
+    forced = np.all(assignments.a_first[:, fixed] == wanted[None, :], axis=1)  # (S,)
+    return CheckResult(acyclic, density, forced)

@@ -10,6 +10,9 @@ Indexing: robots ``0..R-1`` in request order; nodes ``0..V-1`` grouped by robot
 and in path order (``robot_start[r] <= v < robot_start[r+1]``); conflicts
 ``0..M-1`` in request order with sides ``a`` and ``b``; time points ``0..P-1``
 grouped by robot, sorted within each robot (``tp_start[r] <= t < tp_start[r+1]``).
+
+Fixed directions (a conflict's ``first``) are kept in ``forced``; they must not
+form a circular wait with the robots' path order, else the request is rejected.
 """
 
 from __future__ import annotations
@@ -19,11 +22,19 @@ from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Any
 
+import networkx as nx
 import numpy as np
 
 from service.core.schemas import ScheduleRequest
 
-__all__ = ["DensityLimit", "ErrorItem", "Problem", "ProblemError", "problem_from_request"]
+__all__ = [
+    "DensityLimit",
+    "ErrorItem",
+    "Problem",
+    "ProblemError",
+    "forced_arcs",
+    "problem_from_request",
+]
 
 Loc = tuple[str | int, ...]
 # How many input violations one error response lists at most.
@@ -59,6 +70,16 @@ class DensityLimit:
     max_robots: int
 
 
+def forced_arcs(
+    conf_a: np.ndarray, conf_b: np.ndarray, forced: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Fixed conflicts (F,) and their first (F,) and second (F,) nodes, from forced (M,) int8."""
+    conflicts = np.flatnonzero(forced)
+    a_first = forced[conflicts] > 0
+    a, b = conf_a[conflicts], conf_b[conflicts]
+    return conflicts, np.where(a_first, a, b), np.where(a_first, b, a)
+
+
 @dataclass(frozen=True, eq=False)
 class Problem:
     """A validated coordination skeleton graph.
@@ -78,6 +99,7 @@ class Problem:
     conf_b: np.ndarray  # (M,) int node index of side b
     pair_enter: np.ndarray  # (M, 2) float, column 0 side a, column 1 side b
     pair_exit: np.ndarray  # (M, 2) float
+    forced: np.ndarray  # (M,) int8, +1 side a passes first, -1 side b first, 0 free
     density_limits: tuple[DensityLimit, ...]
     tp_time: np.ndarray  # (P,) float, sorted within each robot
     tp_start: np.ndarray  # (R+1,) int
@@ -103,6 +125,16 @@ class Problem:
     def conf_nodes(self) -> np.ndarray:
         """(M, 2) int: node index of side a and side b of every conflict."""
         return np.stack([self.conf_a, self.conf_b], axis=1)
+
+    @cached_property
+    def forced_arcs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The fixed directions: conflicts (F,) int, their first (F,) and second (F,) nodes."""
+        return forced_arcs(self.conf_a, self.conf_b, self.forced)
+
+    @property
+    def has_forced(self) -> bool:
+        """Whether any conflict's direction is fixed (solvers skip all extra work if not)."""
+        return bool(self.forced.any())
 
     @cached_property
     def tp_robot(self) -> np.ndarray:
@@ -176,8 +208,13 @@ def problem_from_request(req: ScheduleRequest) -> Problem:
     errs.raise_if_any()
     limits = _density_limits(req, node_index, conf_a, conf_b, errs)
     _check_goal_times(req, node_robot, conf_a, conf_b, pair_enter, pair_exit, errs)
+    forced = _forced(req)
+    if forced.any():
+        _check_forced_acyclic(req, node_robot, *forced_arcs(conf_a, conf_b, forced), errs)
     errs.raise_if_any()
-    return _build(req, node_index, node_robot, conf_a, conf_b, pair_enter, pair_exit, limits)
+    return _build(
+        req, node_index, node_robot, conf_a, conf_b, pair_enter, pair_exit, forced, limits
+    )
 
 
 def _index_nodes(
@@ -345,6 +382,48 @@ def _check_goal_times(
             )
 
 
+def _forced(req: ScheduleRequest) -> np.ndarray:
+    """(M,) int8 fixed directions: +1 where side a must pass first, -1 side b, 0 free."""
+    sign = {"a": 1, "b": -1, None: 0}
+    return np.array([sign[c.first] for c in req.conflicts], dtype=np.int8)
+
+
+def _check_forced_acyclic(
+    req: ScheduleRequest,
+    node_robot: np.ndarray,
+    conflicts: np.ndarray,
+    first: np.ndarray,
+    second: np.ndarray,
+    errs: _Collector,
+) -> None:
+    """Fixed directions plus path order must leave a DAG; report every fixed arc on a cycle.
+
+    Only the F fixed arcs' endpoints matter: between two of them a cycle can only
+    follow a robot's path forward, so the graph is those endpoints, chained in
+    path order per robot (node indices increase along paths), plus the fixed
+    arcs. A fixed arc lies on a cycle exactly when both ends share a strongly
+    connected component; each such conflict is named with the others of its cycle.
+    """
+    ends = np.unique(np.concatenate([first, second]))  # (U,) sorted node indices
+    same = node_robot[ends[1:]] == node_robot[ends[:-1]]
+    graph = nx.DiGraph()
+    graph.add_edges_from(zip(ends[:-1][same].tolist(), ends[1:][same].tolist(), strict=True))
+    graph.add_edges_from(zip(first.tolist(), second.tolist(), strict=True))
+    component = {
+        v: i for i, nodes in enumerate(nx.strongly_connected_components(graph)) for v in nodes
+    }
+    comp_first = np.array([component[v] for v in first.tolist()], dtype=np.int64)  # (F,)
+    on_cycle = comp_first == np.array([component[v] for v in second.tolist()], dtype=np.int64)
+    for k in np.flatnonzero(on_cycle).tolist():
+        cycle = conflicts[on_cycle & (comp_first == comp_first[k])].tolist()
+        c = req.conflicts[int(conflicts[k])]
+        errs.add(
+            ("conflicts", int(conflicts[k]), "first"),
+            f"fixed directions form a circular wait with the robots' path order: conflicts "
+            f"{cycle} (this one: '{c.a}' and '{c.b}', first '{c.first}')",
+        )
+
+
 def _build(
     req: ScheduleRequest,
     node_index: dict[str, int],
@@ -353,6 +432,7 @@ def _build(
     conf_b: np.ndarray,
     pair_enter: np.ndarray,
     pair_exit: np.ndarray,
+    forced: np.ndarray,
     limits: tuple[DensityLimit, ...],
 ) -> Problem:
     """Assemble the arrays, including each robot's sorted distinct time points."""
@@ -400,6 +480,7 @@ def _build(
         conf_b=conf_b,
         pair_enter=pair_enter,
         pair_exit=pair_exit,
+        forced=forced,
         density_limits=limits,
         tp_time=tp_time,
         tp_start=tp_start,

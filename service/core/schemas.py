@@ -94,7 +94,12 @@ class RobotIn(_Strict):
 
 
 class ConflictIn(_Strict):
-    """An interfering pair of nodes of two robots, with the pair's own section times."""
+    """An interfering pair of nodes of two robots, with the pair's own section times.
+
+    ``first`` fixes the direction in advance (that side passes first, e.g. a robot
+    parked inside the other's route, or a decision already realized); the type
+    stays free. None (the default) leaves the direction to the solver.
+    """
 
     a: Id
     b: Id
@@ -102,6 +107,7 @@ class ConflictIn(_Strict):
     a_exit: Time | None = None
     b_enter: Time | None = None
     b_exit: Time | None = None
+    first: Literal["a", "b"] | None = None
 
 
 class DensityLimitIn(_Strict):
@@ -174,6 +180,7 @@ class ChecksOut(BaseModel):
 
     acyclic: bool
     density: bool
+    forced: bool = True  # every fixed direction (a conflict's ``first``) is honoured
 
 
 class CostsOut(BaseModel):

@@ -113,7 +113,11 @@ def dispatch(request: ScheduleRequest, policy: DispatchPolicy) -> ScheduleRespon
         if used == name
         else f"{name} gave no answer (no solution in time, no model loaded, or it failed)",
     )
-    checked = ChecksOut(acyclic=bool(checks.acyclic[0]), density=bool(checks.density[0]))
+    checked = ChecksOut(
+        acyclic=bool(checks.acyclic[0]),
+        density=bool(checks.density[0]),
+        forced=bool(checks.forced[0]),
+    )
     return _render(request, ctx, output, info, checked)
 
 

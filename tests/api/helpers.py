@@ -55,7 +55,7 @@ def assert_valid_answer(request: dict[str, Any], answer: dict[str, Any]) -> None
     conflicts = [frozenset((c["a"], c["b"])) for c in request_conflicts]
     decided = Counter(frozenset((x["from"], x["to"])) for x in answer["assignment"])
     assert decided == Counter(conflicts) and max(decided.values(), default=1) == 1
-    assert answer["checks"] == {"acyclic": True, "density": True}
+    assert answer["checks"] == {"acyclic": True, "density": True, "forced": True}
     assert answer["objective"] == objective
     assert answer["cost"] == answer["costs"][objective]
     assert [s["robot"] for s in answer["schedule"]] == [r["id"] for r in request["robots"]]

@@ -62,7 +62,7 @@ async def test_missing_models_degrade_but_stay_ready(
         answer = (await post_json(client, tiny)).json()
         assert answer["solver"]["name"] == "exact"
         assert answer["solver"]["fallback_from"] == "gnn_vae"
-        assert answer["checks"] == {"acyclic": True, "density": True}
+        assert answer["checks"] == {"acyclic": True, "density": True, "forced": True}
 
 
 async def test_not_ready_until_warm_up_finishes(
