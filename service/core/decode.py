@@ -11,6 +11,15 @@ builds assignments that are acyclic and density-feasible for *any* input:
   conflict index) while every density clique containing the conflict still has
   budget, hence every clique stays within its budget.
 
+Fixed directions (``Problem.forced``) are honoured by repairing the ranks
+before directions are read (:meth:`Decoder.repair`): a longest-path pass over
+the DAG of path order and fixed arcs raises the second node of every fixed
+conflict just above its first and shifts the rest of that robot's path by the
+same amount (the robot waits), so ranks stay non-decreasing along every path
+and the fixed first node always comes first. Ranks that already agree with
+every fixed direction are left as they are; without fixed directions nothing
+runs at all.
+
 The converse also holds (tested): every acyclic assignment comes from the bids
 ``bids_from_ranks(topological positions)`` and every density-feasible type
 choice from scores 1 (following) / 0 (exclusive) with threshold 0.5.
@@ -18,10 +27,12 @@ choice from scores 1 (following) / 0 (exclusive) with threshold 0.5.
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 from service.core.assignment import Assignments
 from service.core.cliques import Cliques
+from service.core.orientation import csr
 from service.core.problem import Problem
 from service.core.schemas import Objective
 
@@ -33,6 +44,57 @@ MONOTONE = frozenset({"avg_completion", "max_completion", "avg_delay"})
 
 # Budget of the padding clique in the edge -> clique table: never binds.
 _UNBOUNDED = np.iinfo(np.int64).max // 2
+
+
+@numba.njit(cache=True)
+def _topological_order(start: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    """(V,) nodes in an order every arc goes forward in (Kahn); arcs as CSR start (V+1,), dst.
+
+    The graph must be a DAG (path order plus fixed arcs, validated by the problem).
+    """
+    n_nodes = start.size - 1
+    indeg = np.zeros(n_nodes, dtype=np.int64)
+    for k in range(dst.size):
+        indeg[dst[k]] += 1
+    order = np.empty(n_nodes, dtype=np.int64)
+    tail = 0
+    for v in range(n_nodes):
+        if indeg[v] == 0:
+            order[tail] = v
+            tail += 1
+    for head in range(n_nodes):
+        v = order[head]
+        for k in range(start[v], start[v + 1]):
+            w = dst[k]
+            indeg[w] -= 1
+            if indeg[w] == 0:
+                order[tail] = w
+                tail += 1
+    return order
+
+
+@numba.njit(cache=True, nogil=True)
+def _push_forced(
+    ranks: np.ndarray,  # (S, V) float, non-decreasing along each path
+    order: np.ndarray,  # (V,) int, topological order of path order + fixed arcs
+    prev: np.ndarray,  # (V,) int, previous node on the path or -1
+    in_start: np.ndarray,  # (V+1,) int, fixed arcs into each node (CSR)
+    in_first: np.ndarray,  # (F,) int, their first nodes
+) -> np.ndarray:  # (S, V) float, least ranks >= the input honouring every fixed arc
+    """Longest-path repair: each node keeps its path predecessor's shift, and a fixed
+    second node goes just above (next float up) its first node."""
+    out = np.empty_like(ranks)
+    for s in range(ranks.shape[0]):
+        r, o = ranks[s], out[s]
+        for v in order:
+            best = r[v]
+            p = prev[v]
+            if p >= 0:
+                best = max(best, r[v] + (o[p] - r[p]), o[p])
+            for k in range(in_start[v], in_start[v + 1]):
+                best = max(best, np.nextafter(o[in_first[k]], np.inf))
+            o[v] = best
+    return out
 
 
 def bids_from_ranks(problem: Problem, ranks: np.ndarray) -> np.ndarray:
@@ -61,6 +123,40 @@ class Decoder:
         self._chain_slot = problem.node_robot * self._chain_width + rank_in_robot  # (V,)
         self._forbidden = cliques.forbidden()  # (M,)
         self._build_binding_table()
+        if problem.has_forced:
+            self._build_forced_graph()
+
+    def _build_forced_graph(self) -> None:
+        """Path predecessors, fixed in-arcs and a topological order, for :meth:`repair`."""
+        p = self.problem
+        _, first, second = p.forced_arcs  # (F,) each
+        same = p.node_robot[1:] == p.node_robot[:-1]  # (V-1,) v -> v+1 is a path arc
+        self._prev = np.where(np.append(False, same), np.arange(p.n_nodes) - 1, -1)  # (V,)
+        self._in_start, self._in_first = csr(second, first, p.n_nodes)
+        path_src = np.flatnonzero(same)
+        start, dst = csr(
+            np.concatenate([path_src, first]), np.concatenate([path_src + 1, second]), p.n_nodes
+        )
+        self._order = _topological_order(start, dst)  # (V,)
+
+    def repair(self, ranks: np.ndarray) -> np.ndarray:
+        """Ranks (S, V) non-decreasing along paths -> ranks that also put every fixed
+        first node strictly before its second (the same ranks without fixed directions).
+
+        Samples whose repaired ranks are not finite (chain sums that overflowed) are
+        repaired from their ordinal positions in the (rank, node index) order instead,
+        which decode to the same directions but leave room above every rank.
+        """
+        if not self.problem.has_forced:
+            return np.atleast_2d(ranks)
+        ranks = np.atleast_2d(np.asarray(ranks, dtype=np.float64))
+        graph = (self._order, self._prev, self._in_start, self._in_first)
+        out = _push_forced(ranks, *graph)
+        bad = ~np.all(np.isfinite(out), axis=1)  # (S,)
+        if bad.any():
+            position = np.argsort(np.argsort(ranks[bad], axis=1, kind="stable"), axis=1)
+            out[bad] = _push_forced(position.astype(np.float64), *graph)
+        return out
 
     def _build_binding_table(self) -> None:
         """Conflicts inside binding cliques, each with its padded list of those cliques."""
@@ -93,8 +189,11 @@ class Decoder:
         return np.cumsum(padded.reshape(shape), axis=2).reshape(n_samples, -1)[:, self._chain_slot]
 
     def directions(self, ranks: np.ndarray) -> np.ndarray:
-        """a_first (S, M) bool from node ranks (S, V) non-decreasing along each path."""
-        ranks = np.atleast_2d(ranks)
+        """a_first (S, M) bool from node ranks (S, V) non-decreasing along each path.
+
+        Ranks are first repaired to honour the fixed directions (:meth:`repair`).
+        """
+        ranks = self.repair(ranks)
         ra, rb = ranks[:, self.problem.conf_a], ranks[:, self.problem.conf_b]
         return (ra < rb) | ((ra == rb) & (self.problem.conf_a < self.problem.conf_b))
 

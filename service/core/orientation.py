@@ -8,11 +8,15 @@ know whether one more decision keeps the assignment valid:
   b already reaches a in the node graph (path arcs plus the oriented
   conflicts); a depth-first search answers it;
 * type: a conflict may turn following-type only if it is not forbidden and
-  every density clique holding it is still under budget.
+  every density clique holding it is still under budget;
+* a fixed direction (``Problem.forced``) is never reversed: tabu never flips
+  it, and backtracking starts from the fixed arcs already oriented and only
+  chooses the type of a fixed conflict.
 
 A partial acyclic orientation always extends (at least one direction of a new
-conflict is safe, and exclusive is always allowed), so backtracking never
-dead-ends: every leaf it reaches is a valid assignment. The kernels are
+conflict is safe, and exclusive is always allowed); the fixed arcs alone are
+acyclic (validated), so backtracking never dead-ends: every leaf it reaches is
+a valid assignment. The kernels are
 numba-compiled because both searches call them thousands of times per request.
 """
 
@@ -27,7 +31,7 @@ from service.core.assignment import Assignments
 from service.core.cliques import Cliques
 from service.core.problem import Problem
 
-__all__ = ["Enumeration", "OrientationGraph"]
+__all__ = ["Enumeration", "OrientationGraph", "csr"]
 
 UNSET = -1  # orientation of a conflict not decided yet (backtracking)
 
@@ -95,7 +99,7 @@ def _moves_feasible(
     graph: tuple,
 ) -> np.ndarray:
     """(K,) bool: which moves keep the assignment valid (see :meth:`OrientationGraph.feasible`)."""
-    budget, cq_start, cq_clique, succ, inc_start, inc_conf, conf_a, conf_b = graph
+    budget, cq_start, cq_clique, succ, inc_start, inc_conf, conf_a, conf_b, base = graph
     n_nodes = succ.size
     seen = np.zeros(n_nodes, dtype=np.bool_)
     stack = np.empty(n_nodes, dtype=np.int64)
@@ -106,6 +110,8 @@ def _moves_feasible(
         if move >= n_conf:  # type flip
             e = move - n_conf
             out[i] = following[e] or _budget_left(e, counts, budget, cq_start, cq_clique)
+        elif base[move] != UNSET:  # a fixed direction is never reversed
+            out[i] = False
         else:  # direction flip: the new arc u -> v must not close a cycle without the old arc
             e = move
             u, v = (conf_b[e], conf_a[e]) if orient[e] == 1 else (conf_a[e], conf_b[e])
@@ -139,9 +145,10 @@ def _enumerate(
     are the partial assignment. Fills ``out_a``/``out_f`` (K, M) with the next
     leaves, fewer than K only when the tree is exhausted (depth -1).
     Value k in 0..3 at a conflict: direction = preferred for k < 2, the other
-    for k >= 2; type = ``follow_first`` for even k, the other for odd k.
+    for k >= 2; type = ``follow_first`` for even k, the other for odd k. A fixed
+    conflict stays oriented as ``base`` says (its preferred direction): k < 2 only.
     """
-    budget, cq_start, cq_clique, succ, inc_start, inc_conf, conf_a, conf_b = graph
+    budget, cq_start, cq_clique, succ, inc_start, inc_conf, conf_a, conf_b, base = graph
     n_conf = order.size
     seen = np.zeros(succ.size, dtype=np.bool_)
     stack = np.empty(succ.size, dtype=np.int64)
@@ -154,10 +161,11 @@ def _enumerate(
                 following[e] = False
                 for k in range(cq_start[e], cq_start[e + 1]):
                     counts[cq_clique[k]] -= 1
-            orient[e] = UNSET
+            orient[e] = base[e]
         k = state[depth] + 1
+        last = 4 if base[e] == UNSET else 2  # a fixed conflict only chooses its type
         placed = False
-        while k < 4:
+        while k < last:
             a_first = prefer_a[e] if k < 2 else not prefer_a[e]
             follow = follow_first if k % 2 == 0 else not follow_first
             if follow and not (
@@ -166,7 +174,9 @@ def _enumerate(
                 k += 1
                 continue
             u, v = (conf_a[e], conf_b[e]) if a_first else (conf_b[e], conf_a[e])
-            if _reaches(v, u, orient, succ, inc_start, inc_conf, conf_a, conf_b, seen, stack):
+            if base[e] == UNSET and _reaches(
+                v, u, orient, succ, inc_start, inc_conf, conf_a, conf_b, seen, stack
+            ):
                 k = 4 if k >= 2 else 2  # this direction closes a cycle: skip both its types
                 continue
             orient[e] = 1 if a_first else 0
@@ -198,10 +208,10 @@ class Enumeration:
 
     graph: OrientationGraph
     order: np.ndarray  # (M,) conflicts in branching order
-    prefer_a: np.ndarray  # (M,) bool, the direction tried first
+    prefer_a: np.ndarray  # (M,) bool, the direction tried first (the fixed one, if fixed)
     follow_first: bool
     state: np.ndarray  # (M + 1,) value index per depth, then the current depth
-    orient: np.ndarray  # (M,) int8
+    orient: np.ndarray  # (M,) int8, starts as the fixed directions (graph.base)
     following: np.ndarray  # (M,) bool
     counts: np.ndarray  # (Q,) following-type conflicts per clique
 
@@ -238,15 +248,17 @@ class OrientationGraph:
         same = problem.node_robot[1:] == problem.node_robot[:-1]
         self.succ = np.full(n_nodes, -1, dtype=np.int64)  # (V,) next node on the path, or -1
         self.succ[:-1][same] = np.arange(1, n_nodes)[same]
-        self.inc_start, self.inc_conf = _csr(
+        self.inc_start, self.inc_conf = csr(
             np.concatenate([problem.conf_a, problem.conf_b]),
             np.tile(np.arange(n_conf), 2),
             n_nodes,
         )  # node -> incident conflicts
-        self.cq_start, self.cq_clique = _csr(
+        self.cq_start, self.cq_clique = csr(
             cliques.edge, cliques.clique_of_incidence, n_conf
         )  # conflict -> its cliques
         self.may_follow = ~cliques.forbidden()  # (M,)
+        # (M,) int8 orientation of the fixed conflicts (1 a->b, 0 b->a), UNSET elsewhere
+        self.base = np.where(problem.forced == 0, UNSET, problem.forced > 0).astype(np.int8)
 
     def kernel_args(self) -> tuple[np.ndarray, ...]:
         """The static arrays every kernel takes, as one tuple (unpacked inside the kernel)."""
@@ -254,7 +266,7 @@ class OrientationGraph:
         return (
             self.cliques.budget.astype(np.int64), self.cq_start, self.cq_clique,
             self.succ, self.inc_start, self.inc_conf,
-            p.conf_a.astype(np.int64), p.conf_b.astype(np.int64),
+            p.conf_a.astype(np.int64), p.conf_b.astype(np.int64), self.base,
         )  # fmt: skip
 
     def feasible(self, a_first: np.ndarray, following: np.ndarray, moves: np.ndarray) -> np.ndarray:
@@ -277,7 +289,8 @@ class OrientationGraph:
 
         Conflicts are decided in ``order`` (M,); at each, the direction
         ``prefer_a`` (M,) bool is tried before the other, and following-type
-        before exclusive when ``follow_first``.
+        before exclusive when ``follow_first``. Fixed conflicts keep their fixed
+        direction whatever ``prefer_a`` says.
         """
         n_conf = self.problem.n_conflicts
         state = np.full(n_conf + 1, -1, dtype=np.int64)
@@ -285,16 +298,16 @@ class OrientationGraph:
         return Enumeration(
             graph=self,
             order=np.asarray(order, dtype=np.int64),
-            prefer_a=np.asarray(prefer_a, dtype=np.bool_),
+            prefer_a=np.where(self.base == UNSET, prefer_a, self.base == 1),
             follow_first=bool(follow_first),
             state=state,
-            orient=np.full(n_conf, UNSET, dtype=np.int8),
+            orient=self.base.copy(),
             following=np.zeros(n_conf, dtype=np.bool_),
             counts=np.zeros(self.cliques.budget.size, dtype=np.int64),
         )
 
 
-def _csr(keys: np.ndarray, values: np.ndarray, n_keys: int) -> tuple[np.ndarray, np.ndarray]:
+def csr(keys: np.ndarray, values: np.ndarray, n_keys: int) -> tuple[np.ndarray, np.ndarray]:
     """Group ``values`` by ``keys`` in 0..n_keys-1 -> (start (n_keys+1,), values sorted by key)."""
     order = np.argsort(keys, kind="stable")
     start = np.zeros(n_keys + 1, dtype=np.int64)

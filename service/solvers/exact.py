@@ -2,7 +2,8 @@
 
 Model (one delay variable per *event*, see :attr:`Problem.events`):
 
-* literals ``a_first[c]`` (side a passes first) and ``following[c]``;
+* literals ``a_first[c]`` (side a passes first) and ``following[c]``; a
+  conflict with a fixed direction (``Problem.forced``) has its literal fixed;
 * acyclicity made explicit: an integer position per node, increasing along
   every path and from the first to the second node of every conflict. Time
   constraints alone do not exclude node cycles: when pair sections lie inside
@@ -124,6 +125,7 @@ def build_model(problem: Problem, cliques: Cliques, objective: Objective) -> Exa
 
     # Constraints.
     _add_acyclicity(model, problem, a_first)
+    _fix_directions(model, problem, a_first)
     _add_density(model, cliques, following)
     for e, nxt in enumerate(problem.event_next.tolist()):
         if nxt >= 0:
@@ -151,6 +153,12 @@ def _add_acyclicity(model: cp_model.CpModel, problem: Problem, a_first: list) ->
     for c, (a, b) in enumerate(zip(problem.conf_a.tolist(), problem.conf_b.tolist(), strict=True)):
         model.add(pos[b] >= pos[a] + 1).only_enforce_if(a_first[c])
         model.add(pos[a] >= pos[b] + 1).only_enforce_if(a_first[c].Not())
+
+
+def _fix_directions(model: cp_model.CpModel, problem: Problem, a_first: list) -> None:
+    """A fixed direction fixes its conflict's literal (side a first where forced is +1)."""
+    for c in problem.forced_arcs[0].tolist():
+        model.add(a_first[c] == int(problem.forced[c] > 0))
 
 
 def _add_density(model: cp_model.CpModel, cliques: Cliques, following: list) -> None:
