@@ -12,6 +12,7 @@ Pillow stores only the changed part of each frame.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -24,23 +25,31 @@ from PIL import Image
 from service.pictures.geometry import positions_at
 from service.pictures.layout import draw_world
 from service.pictures.plan import Json, plot_bounds, robot_paths, robot_waits, trajectories
-from service.pictures.style import WAIT_COLOUR, new_figure, robot_colours, world_figure_size
+from service.pictures.style import (
+    LABEL_FONT_SIZE,
+    MAX_LABELLED_ROBOTS,
+    WAIT_COLOUR,
+    new_figure,
+    robot_colours,
+    world_figure_size,
+)
 
-__all__ = ["write_gif", "frame_times", "Frames"]
+__all__ = ["write_gif", "frame_times", "robot_motion", "Motion", "Frames"]
 
 # A 6-inch long side at 100 dpi: ~600 px frames.
 LONG_SIDE_IN = 6.0
 MAX_ASPECT = 2.0
-PATH_ALPHA = 0.2
+PATH_ALPHA = 0.35
 PATH_WIDTH = 0.8
 DISC_ALPHA = 0.8
-DISC_EDGE_WIDTH = 1.5
+DISC_EDGE_WIDTH = 1.0
+WAIT_EDGE_WIDTH = 3.0
 CAPTION_FONT_SIZE = 9
 CAPTION_POSITION = (0.01, 0.99)  # axes fraction, top left
 AXES_MARGIN = 0.02  # figure fraction around the floor
-# One palette for the whole GIF, built from this many evenly spaced frames: 128
+# One palette for the whole GIF, built from this many evenly spaced frames: 64
 # colours hold the robot colours and the antialiased edges without dithering noise.
-PALETTE_COLOURS = 128
+PALETTE_COLOURS = 64
 PALETTE_SAMPLE_FRAMES = 8
 MS_PER_S = 1000.0
 WAIT_RGBA = np.array(to_rgba(WAIT_COLOUR))
@@ -59,22 +68,40 @@ def frame_times(response: Json, fps: float, max_frames: int) -> np.ndarray:
     return np.linspace(start, end, max(count, 2))
 
 
-def _robot_states(
-    response: Json, robots: list[str], times: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Positions ``(F, R, 2)``, presence ``(F, R)`` and waiting ``(F, R)`` at the frame times."""
+@dataclass(frozen=True)
+class Motion:
+    """Where the robots are at each frame time.
+
+    Shapes: ``positions (F, R, 2)``, ``present (F, R)``, ``waiting (F, R)``.
+    """
+
+    robots: list[str]
+    positions: np.ndarray
+    present: np.ndarray
+    waiting: np.ndarray
+
+
+def _during(times: np.ndarray, intervals: list[tuple[float, float]]) -> np.ndarray:
+    """Whether each time lies in one of the closed intervals. Shapes: ``(F,)`` -> ``(F,)``."""
+    inside = np.zeros(len(times), dtype=bool)
+    for start, end in intervals:
+        inside |= (times >= start) & (times <= end)
+    return inside
+
+
+def robot_motion(response: Json, robots: list[str], times: np.ndarray) -> Motion:
+    """Positions, presence and waiting of ``robots`` at the frame ``times``."""
     paths = trajectories(response)
     waits = robot_waits(response)
     located = [positions_at(paths[robot], times) for robot in robots]
-    waiting = [
-        np.any([(times >= a) & (times <= b) for a, b in waits[robot]], axis=0)
-        if waits[robot]
-        else np.zeros(len(times), dtype=bool)
-        for robot in robots
-    ]
-    positions = np.stack([xy for xy, _ in located], axis=1)
     present = np.stack([p for _, p in located], axis=1)
-    return positions, present, np.stack(waiting, axis=1) & present
+    waiting = np.stack([_during(times, waits[robot]) for robot in robots], axis=1)
+    return Motion(
+        robots=robots,
+        positions=np.stack([xy for xy, _ in located], axis=1),
+        present=present,
+        waiting=waiting & present,
+    )
 
 
 def _background(request: Json, world: Json | None) -> tuple[Figure, Axes]:
@@ -104,32 +131,54 @@ def _playback_caption(t: float, speed_up: float) -> str:
     return caption if math.isclose(speed_up, 1.0) else f"{caption}   (playback x{speed_up:.1f})"
 
 
+def _discs(axes: Axes, diameters: np.ndarray) -> EllipseCollection:
+    """The robots' footprints as one collection of discs, blitted frame by frame."""
+    discs = EllipseCollection(
+        diameters,
+        diameters,
+        np.zeros(len(diameters)),
+        units="xy",
+        offsets=np.zeros((len(diameters), 2)),
+        offset_transform=axes.transData,
+        animated=True,
+    )
+    axes.add_collection(discs, autolim=False)
+    return discs
+
+
+def _show_robots(discs: EllipseCollection, colours: np.ndarray, motion: Motion, k: int) -> None:
+    """Move the discs to frame ``k``: absent robots transparent, waiting ones with a wide
+    orange rim."""
+    present, waiting = motion.present[k], motion.waiting[k]
+    fill = colours.copy()
+    fill[:, 3] = DISC_ALPHA * present
+    rim = np.where(waiting[:, None], WAIT_RGBA, colours)
+    rim[:, 3] = present
+    discs.set_offsets(motion.positions[k])
+    discs.set_facecolors(fill)
+    discs.set_edgecolors(rim)
+    discs.set_linewidths(np.where(waiting, WAIT_EDGE_WIDTH, DISC_EDGE_WIDTH))
+
+
 def _render_frames(
     request: Json, response: Json, world: Json | None, times: np.ndarray, fps: float
 ) -> Frames:
-    """RGB frames ``(H, W, 3)`` of the robots at ``times``.
+    """RGB frames ``(H, W, 3)`` of the robots at ``times`` (ids written when few).
 
     Robots absent from the request are skipped (their radius is unknown).
     """
     radius = {robot["id"]: float(robot["radius"]) for robot in request["robots"]}
-    robots = [robot for robot in trajectories(response) if robot in radius]
-    positions, present, waiting = _robot_states(response, robots, times)
-    colours = robot_colours(robot_paths(request))
-    face = np.array([colours[r] for r in robots]).reshape(-1, 4)
-    diameters = np.array([2 * radius[r] for r in robots])
+    motion = robot_motion(response, [r for r in trajectories(response) if r in radius], times)
+    palette = robot_colours(robot_paths(request))
+    colours = np.array([palette[r] for r in motion.robots]).reshape(-1, 4)
 
     figure, axes = _background(request, world)
-    discs = EllipseCollection(
-        diameters,
-        diameters,
-        np.zeros(len(robots)),
-        units="xy",
-        offsets=positions[0],
-        offset_transform=axes.transData,
-        linewidths=DISC_EDGE_WIDTH,
-        animated=True,
-    )
-    axes.add_collection(discs, autolim=False)
+    discs = _discs(axes, np.array([2 * radius[r] for r in motion.robots]))
+    labels = [
+        axes.text(0, 0, robot, fontsize=LABEL_FONT_SIZE, ha="center", va="center", animated=True)
+        for robot in motion.robots
+        if len(motion.robots) <= MAX_LABELLED_ROBOTS
+    ]
     caption = axes.text(
         *CAPTION_POSITION,
         "",
@@ -144,16 +193,13 @@ def _render_frames(
     speed_up = (times[-1] - times[0]) / (len(times) - 1) * fps
     frames: Frames = []
     for k, t in enumerate(times):
-        fill = face.copy()
-        fill[:, 3] = DISC_ALPHA * present[k]
-        rim = np.where(waiting[k][:, None], WAIT_RGBA, face)
-        rim[:, 3] = present[k]
-        discs.set_offsets(positions[k])
-        discs.set_facecolors(fill)
-        discs.set_edgecolors(rim)
-        caption.set_text(_playback_caption(float(t), speed_up))
         canvas.restore_region(background)
+        _show_robots(discs, colours, motion, k)
         axes.draw_artist(discs)
+        for j in np.flatnonzero(motion.present[k]) if labels else []:
+            labels[j].set_position(motion.positions[k, j])
+            axes.draw_artist(labels[j])
+        caption.set_text(_playback_caption(float(t), speed_up))
         axes.draw_artist(caption)
         frames.append(np.asarray(canvas.buffer_rgba())[..., :3].copy())
     return frames
@@ -206,6 +252,8 @@ def write_gif(
     """
     if fps <= 0 or max_frames < 2:
         raise ValueError(f"need fps > 0 and max_frames >= 2, got {fps} and {max_frames}")
+    if not trajectories(response):
+        raise ValueError("the response has no trajectories to animate")
     times = frame_times(response, fps, max_frames)
     path = Path(path)
     _save_gif(_render_frames(request, response, world, times, fps), path, fps)

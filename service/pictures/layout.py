@@ -28,6 +28,8 @@ from service.pictures.plan import (
     robot_paths,
 )
 from service.pictures.style import (
+    LABEL_FONT_SIZE,
+    MAX_LABELLED_ROBOTS,
     OBSTACLE_COLOUR,
     TYPE_COLOURS,
     TYPE_LABELS,
@@ -48,10 +50,6 @@ FOOTPRINT_ALPHA = 0.25
 MARKER_SIZE = 30
 START_MARKER = "o"
 GOAL_MARKER = "X"
-# Robot ids are written next to their start only up to this many robots (beyond,
-# they overlap into a blot).
-MAX_LABELLED_ROBOTS = 20
-LABEL_FONT_SIZE = 7
 LEGEND_FONT_SIZE = 8
 LEGEND_COLUMNS = 3
 NEUTRAL_COLOUR = "0.3"

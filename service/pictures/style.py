@@ -25,6 +25,8 @@ __all__ = [
     "WAIT_HATCH",
     "OBSTACLE_COLOUR",
     "DPI",
+    "MAX_LABELLED_ROBOTS",
+    "LABEL_FONT_SIZE",
     "robot_colours",
     "new_figure",
     "world_figure_size",
@@ -46,10 +48,15 @@ WAIT_COLOUR = "tab:orange"
 WAIT_HATCH = "////"
 OBSTACLE_COLOUR = "0.65"
 DPI = 100
+# Robot ids are written on the floor pictures only up to this many robots
+# (beyond, they overlap into a blot).
+MAX_LABELLED_ROBOTS = 20
+LABEL_FONT_SIZE = 7
 
-# Up to this many robots the qualitative tab10 colours are used; more robots get
-# hues spaced by the golden ratio, so that neighbours in id order stay distinct.
-TAB10_MAX_ROBOTS = 10
+# The tab10 colours that mean nothing else here (red, blue, purple: assignment
+# types; orange: waits; grey: obstacles). More robots get hues spaced by the
+# golden ratio, so that neighbours in id order stay distinct.
+ROBOT_PALETTE = ("tab:green", "tab:brown", "tab:pink", "tab:olive", "tab:cyan")
 GOLDEN_RATIO_CONJUGATE = 0.618033988749895
 ROBOT_SATURATION = 0.75
 ROBOT_VALUE = 0.85
@@ -62,8 +69,8 @@ def robot_colours(robot_ids: Iterable[str]) -> dict[str, tuple[float, float, flo
     and the animation (response order) give a robot the same colour.
     """
     ids = sorted(set(robot_ids))
-    if len(ids) <= TAB10_MAX_ROBOTS:
-        return {robot: to_rgba(f"C{k}") for k, robot in enumerate(ids)}
+    if len(ids) <= len(ROBOT_PALETTE):
+        return {robot: to_rgba(colour) for robot, colour in zip(ids, ROBOT_PALETTE, strict=False)}
     hues = (np.arange(len(ids)) * GOLDEN_RATIO_CONJUGATE) % 1.0
     hsv = np.stack((hues, np.full_like(hues, ROBOT_SATURATION), np.full_like(hues, ROBOT_VALUE)), 1)
     return {robot: (*map(float, rgb), 1.0) for robot, rgb in zip(ids, hsv_to_rgb(hsv), strict=True)}
