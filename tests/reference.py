@@ -6,9 +6,11 @@ arrays) and implements the contract as literally as possible in plain Python:
 * updated times by fixpoint iteration over every time point of every robot
   (no events, no topological order), divergence detected by a pass count;
 * node-level acyclicity by a depth-first search;
+* fixed directions (a conflict's ``first``) by comparing every direction with them;
 * density by enumerating every clique of the conflict graph and keeping the
   maximal ones;
-* the optimum by enumerating all 2^M directions x 2^M types.
+* the optimum by enumerating all 2^M directions x 2^M types (those agreeing
+  with the fixed directions).
 
 It is deliberately slow and simple: it is the thing the fast code is compared to.
 """
@@ -33,6 +35,7 @@ class RefConflict:
     section: tuple[
         tuple[float, float], tuple[float, float]
     ]  # ((a_enter, a_exit), (b_enter, b_exit))
+    first: str | None = None  # "a" or "b" when the direction is fixed
 
 
 @dataclass(frozen=True)
@@ -72,7 +75,7 @@ def reference_problem(req: dict[str, Any]) -> RefProblem:
             exit_ = node["exit"] if exit_ is None else exit_
             times[node_robot[c[side]]].update((enter, exit_))
             section.append((enter, exit_))
-        conflicts.append(RefConflict(c["a"], c["b"], (section[0], section[1])))
+        conflicts.append(RefConflict(c["a"], c["b"], (section[0], section[1]), c.get("first")))
     return RefProblem(
         robot_ids=[r["id"] for r in req["robots"]],
         robot_nodes=robot_nodes,
@@ -160,6 +163,14 @@ def is_acyclic(ref: RefProblem, a_first: Any) -> bool:
     return all(colour[v] != 0 or visit(v) for v in succ)
 
 
+def honours_fixed(ref: RefProblem, a_first: Any) -> bool:
+    """Every conflict with a fixed direction passes its ``first`` side first."""
+    return all(
+        conf.first is None or bool(a_first[c]) == (conf.first == "a")
+        for c, conf in enumerate(ref.conflicts)
+    )
+
+
 def density_groups(ref: RefProblem) -> list[tuple[frozenset[int], int]]:
     """(conflicts inside, following budget) of every maximal clique and explicit limit."""
     adj: dict[str, set[str]] = {}
@@ -206,10 +217,15 @@ class Candidate:
 
 
 def feasible_assignments(ref: RefProblem) -> list[Candidate]:
-    """Every acyclic, density-feasible assignment with its four costs (2^M x 2^M)."""
+    """Every acyclic, density-feasible assignment honouring the fixed directions, with its
+    four costs (2^M x 2^M)."""
     m = ref.n_conflicts
     groups = density_groups(ref)
-    directions = [d for d in itertools.product((False, True), repeat=m) if is_acyclic(ref, d)]
+    directions = [
+        d
+        for d in itertools.product((False, True), repeat=m)
+        if is_acyclic(ref, d) and honours_fixed(ref, d)
+    ]
     types = [f for f in itertools.product((False, True), repeat=m) if density_ok(groups, f)]
     return [Candidate(d, f, costs(ref, least_times(ref, d, f))) for d in directions for f in types]
 
@@ -246,6 +262,28 @@ def tiny_request(seed: int, objective: str = "avg_completion") -> dict[str, Any]
         groups = _largest_clique(reference_problem(req))
         req["density_limits"] = [{"nodes": groups, "max_robots": int(rng.integers(1, 3))}]
     return req
+
+
+def fix_directions(req: dict[str, Any], seed: int, share: float = 0.5) -> dict[str, Any]:
+    """A copy of ``req`` with about ``share`` of its conflicts given a random fixed direction.
+
+    The directions are read off random node ranks increasing along every path
+    (a random topological order), so together with path order they never form a
+    cycle: the request stays valid.
+    """
+    rng = np.random.default_rng([seed, 11])
+    rank = {
+        n["id"]: r
+        for robot in req["robots"]
+        for n, r in zip(robot["nodes"], np.cumsum(rng.random(len(robot["nodes"]))), strict=True)
+    }
+    conflicts = [
+        {**c, "first": "a" if rank[c["a"]] < rank[c["b"]] else "b"}
+        if rng.random() < share
+        else dict(c)
+        for c in req.get("conflicts", [])
+    ]
+    return {**req, "conflicts": conflicts}
 
 
 def _add_triangle(rng: np.random.Generator, req: dict[str, Any]) -> None:
