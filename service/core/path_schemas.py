@@ -1,0 +1,203 @@
+"""Wire models of the paths form: robots given by their paths, answered with trajectories.
+
+A request of the paths form describes each robot by a polyline, a disk footprint
+and its timing (a constant ``speed`` from ``start_time``, or one planned time per
+path point). Field-by-field rules live here; the geometry package derives the
+coordination graph, and the motion package turns the schedule back into motion.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+from service.core.schemas import (
+    MAX_TIME,
+    AssignmentOut,
+    ChecksOut,
+    CostsOut,
+    Objective,
+    OptionsIn,
+    RobotScheduleOut,
+    ScheduleRequest,
+    SolverInfoOut,
+)
+
+__all__ = [
+    "MAX_COORDINATE",
+    "MAX_RADIUS",
+    "MAX_SPEED",
+    "PathRobotIn",
+    "PathsRequest",
+    "TrajectoryOut",
+    "MotionChecksOut",
+    "DependencyOut",
+    "WaitPointOut",
+    "PathsScheduleResponse",
+    "CoordinationGraphResponse",
+]
+
+# Coordinates are metres; a floor larger than 2,000 km is a unit error, not a layout.
+MAX_COORDINATE = 1e6
+# A footprint wider than 1 km or faster than 1 km/s is a unit error too.
+MAX_RADIUS = 1e3
+MAX_SPEED = 1e3
+
+Coordinate = Annotated[
+    float, Field(strict=False, ge=-MAX_COORDINATE, le=MAX_COORDINATE, allow_inf_nan=False)
+]
+Point = tuple[Coordinate, Coordinate]
+Time = Annotated[float, Field(ge=0.0, le=MAX_TIME, allow_inf_nan=False)]
+Id = Annotated[str, Field(min_length=1, max_length=200)]
+
+
+class PathRobotIn(BaseModel):
+    """One robot of the paths form: its path, disk footprint and planned timing."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    id: Id
+    path: list[Point] = Field(min_length=2)
+    radius: float = Field(gt=0.0, le=MAX_RADIUS, allow_inf_nan=False)
+    speed: float | None = Field(default=None, gt=0.0, le=MAX_SPEED, allow_inf_nan=False)
+    start_time: Time | None = None
+    times: list[Time] | None = None
+
+    @field_validator("path")
+    @classmethod
+    def _distinct_consecutive(cls, path: list[Point]) -> list[Point]:
+        """Consecutive points must differ: a zero-length segment has no heading."""
+        for k in range(1, len(path)):
+            if path[k] == path[k - 1]:
+                raise ValueError(f"path points {k - 1} and {k} are equal: {list(path[k])}")
+        return path
+
+    @field_validator("times")
+    @classmethod
+    def _increasing(cls, times: list[float] | None) -> list[float] | None:
+        """Planned times must strictly increase (every segment takes positive time)."""
+        if times is not None:
+            for k in range(1, len(times)):
+                if not times[k] > times[k - 1]:
+                    raise ValueError(
+                        f"times must strictly increase: times[{k}] = {times[k]} <= "
+                        f"times[{k - 1}] = {times[k - 1]}"
+                    )
+        return times
+
+    @model_validator(mode="after")
+    def _one_timing(self) -> PathRobotIn:
+        """Exactly one timing: ``speed`` (with ``start_time``) or ``times`` (one per point)."""
+        if self.times is None:
+            if self.speed is None:
+                raise ValueError("give 'speed' (with optional 'start_time') or 'times'")
+            arrival = (self.start_time or 0.0) + path_length(self.path) / self.speed
+            if not arrival <= MAX_TIME:
+                raise ValueError(f"'speed': the robot would arrive at {arrival} s > {MAX_TIME}")
+            return self
+        if self.speed is not None:
+            raise ValueError("'speed' and 'times' are exclusive: give one of them")
+        if self.start_time is not None:
+            raise ValueError("'start_time' comes with 'speed'; with 'times' it is times[0]")
+        if len(self.times) != len(self.path):
+            raise ValueError(
+                f"'times' has {len(self.times)} entries; 'path' has {len(self.path)} points"
+            )
+        return self
+
+
+def path_length(path: list[Point]) -> float:
+    """Total Euclidean length of a polyline, metres."""
+    return sum(math.dist(p, q) for p, q in zip(path[:-1], path[1:], strict=True))
+
+
+class PathsRequest(BaseModel):
+    """Body of the paths form of ``POST /v1/schedules`` and ``POST /v1/coordination-graphs``."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    objective: Objective = "avg_completion"
+    robots: list[PathRobotIn] = Field(min_length=1)
+    options: OptionsIn = Field(default_factory=OptionsIn)
+
+    @model_validator(mode="after")
+    def _unique_ids(self) -> PathsRequest:
+        """Robot ids name trajectories and nodes, so they must be unique."""
+        seen: set[str] = set()
+        for robot in self.robots:
+            if robot.id in seen:
+                raise ValueError(f"duplicate robot id '{robot.id}'")
+            seen.add(robot.id)
+        return self
+
+
+def request_form(body: object) -> Literal["paths", "graph"]:
+    """Which form a raw request body uses: ``paths`` when its first robot has a ``path``."""
+    if isinstance(body, dict):
+        robots = body.get("robots")
+        if isinstance(robots, list) and robots and isinstance(robots[0], dict):
+            return "paths" if "path" in robots[0] else "graph"
+    return "graph"
+
+
+class TrajectoryOut(BaseModel):
+    """Timed waypoints ``[t, x, y]`` of one robot; motion is linear between consecutive ones."""
+
+    robot: str
+    points: list[tuple[float, float, float]]
+
+
+class MotionChecksOut(ChecksOut):
+    """The graph checks plus the independent clearance check of the executed trajectories."""
+
+    collision_free: bool
+    min_clearance_m: float | None = Field(
+        description="Least gap between two present footprints (centre distance minus both "
+        "radii) over the whole run; null when no two robots are ever present together."
+    )
+
+
+class WaitPointOut(BaseModel):
+    """A point where a robot may have to wait until other robots have passed theirs."""
+
+    s: float = Field(description="Arc length on the robot's path where it waits, metres.")
+    after: list[dict[str, float | str]] = Field(
+        description="Each entry {robot, s}: that robot must have reached arc length s."
+    )
+
+
+class DependencyOut(BaseModel):
+    """One robot's dependency plan: its wait points in path order."""
+
+    robot: str
+    waits: list[WaitPointOut]
+
+
+class PathsScheduleResponse(BaseModel):
+    """Body of a successful paths-form ``POST /v1/schedules``.
+
+    ``schedule``, ``cost`` and ``costs`` describe the returned trajectories: what
+    will happen when they are executed.
+    """
+
+    objective: Objective
+    cost: float
+    costs: CostsOut
+    assignment: list[AssignmentOut]
+    schedule: list[RobotScheduleOut]
+    solver: SolverInfoOut
+    checks: MotionChecksOut
+    graph: ScheduleRequest | None
+    node_spans: dict[str, tuple[float, float]]
+    trajectories: list[TrajectoryOut]
+    dependencies: list[DependencyOut]
+
+
+class CoordinationGraphResponse(BaseModel):
+    """Body of ``POST /v1/coordination-graphs``: the derived graph and where its nodes lie."""
+
+    graph: ScheduleRequest | None
+    node_spans: dict[str, tuple[float, float]]
+    isolated_robots: list[str]

@@ -1,0 +1,1 @@
+"""Geometry: robot paths and footprints -> where they interfere -> a coordination graph."""

@@ -1,0 +1,303 @@
+"""From interference boxes to a coordination graph: nodes, conflicts, densities, fixed orders.
+
+* **Nodes**: on each robot, the arc-length intervals of all its boxes (with every
+  other robot) merged where they overlap or touch, so a robot's nodes are
+  strictly separated and in path order.
+* **Conflicts**: one per pair of nodes of two robots that share a box; its pair
+  section is the union box (the stretch of each path where that pair interferes).
+* **Density**: 2 (one robot may follow another) when every box touching the node
+  is co-directional, else 1 (crossings and head-on sections are exclusive).
+* **Fixed orders**: a robot is present at its first point from its start time
+  until it moves, so when that point lies in a conflict's section the robot
+  parked there must pass first. Two robots parked in each other's way, or a
+  cycle of such fixed orders, leave no collision-free plan: a :class:`ProblemError`
+  names the robots.
+
+Times of the graph are the planned times at those arc lengths (the robot's own
+clock from ``speed``/``start_time`` or ``times``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import networkx as nx
+import numpy as np
+
+from service.core.path_schemas import PathsRequest
+from service.core.problem import ErrorItem, ProblemError
+from service.core.schemas import ScheduleRequest
+from service.geometry.interference import Boxes, interference_boxes
+from service.geometry.paths import RobotPath
+
+__all__ = ["CoordinationGraph", "GeometrySettings", "build_graph"]
+
+# Intervals of one robot closer than this (metres) merge into one node: only exact
+# touching (shared piece ends, equal up to rounding) is meant.
+TOUCH_TOL = 1e-9
+
+
+@dataclass(frozen=True)
+class GeometrySettings:
+    """Resolution and tolerance of the interference geometry (documented in docs/paths.md).
+
+    ``resolution``: longest piece of a path, metres; sections and following gaps are
+    conservative by up to this much. ``margin``: extra clearance, metres, that every
+    plan keeps between two footprints (it also absorbs floating-point rounding).
+    """
+
+    resolution: float = 0.25
+    margin: float = 0.05
+
+
+@dataclass(frozen=True, eq=False)
+class CoordinationGraph:
+    """A coordination graph derived from paths, with the geometry behind it.
+
+    Shapes: V nodes, M conflicts, B boxes. A conflict's side a is its lower robot
+    index ``i``, side b the higher ``j``; boxes are sorted by conflict.
+    """
+
+    paths: tuple[RobotPath, ...]
+    node_robot: np.ndarray  # (V,) int, robot of each node, nodes grouped by robot in path order
+    node_span: np.ndarray  # (V, 2) float, [s_enter, s_exit] on its robot's path
+    node_density: np.ndarray  # (V,) int, 1 or 2
+    conf_node: np.ndarray  # (M, 2) int, node of side a (robot i) and side b (robot j)
+    conf_span: np.ndarray  # (M, 4) float, union box x0 x1 (on i) y0 y1 (on j)
+    forced: np.ndarray  # (M,) int8, +1 side a first, -1 side b first, 0 free
+    boxes: Boxes  # (B,) sorted by conflict
+    box_start: np.ndarray  # (M+1,) int, boxes of conflict m are box_start[m]:box_start[m+1]
+
+    @property
+    def n_conflicts(self) -> int:
+        return int(self.conf_node.shape[0])
+
+    def node_ids(self) -> list[str]:
+        """``{robot id}/{k}``: the k-th node of the robot (injective: k has no '/')."""
+        ids = []
+        for v, r in enumerate(self.node_robot.tolist()):
+            k = v - int(np.searchsorted(self.node_robot, r))
+            ids.append(f"{self.paths[r].id}/{k}")
+        return ids
+
+    def robots_in_graph(self) -> np.ndarray:
+        """(R',) int: robots with at least one node, in request order."""
+        return np.unique(self.node_robot)
+
+    def isolated_robots(self) -> list[str]:
+        """Ids of robots that interfere with nobody (they have no node)."""
+        inside = set(self.robots_in_graph().tolist())
+        return [p.id for r, p in enumerate(self.paths) if r not in inside]
+
+    def node_spans(self) -> dict[str, tuple[float, float]]:
+        """Node id -> its arc-length interval ``[s_enter, s_exit]``."""
+        return {
+            nid: (float(a), float(b))
+            for nid, (a, b) in zip(self.node_ids(), self.node_span.tolist(), strict=True)
+        }
+
+    def to_request(self, base: PathsRequest) -> ScheduleRequest | None:
+        """The graph as a graph-form request (objective and options of ``base``); None if empty."""
+        if self.node_robot.size == 0:
+            return None
+        ids = self.node_ids()
+        robots = []
+        for r in self.robots_in_graph().tolist():
+            path = self.paths[r]
+            nodes = np.flatnonzero(self.node_robot == r)
+            times = path.time_at(self.node_span[nodes])  # (n, 2)
+            robots.append(
+                {
+                    "id": path.id,
+                    "nodes": [
+                        {"id": ids[v], "enter": t0, "exit": t1, "density": int(d)}
+                        for v, (t0, t1), d in zip(
+                            nodes.tolist(), times.tolist(), self.node_density[nodes], strict=True
+                        )
+                    ],
+                    "goal_time": path.finish_time,
+                }
+            )
+        conflicts = []
+        for m, (a, b) in enumerate(self.conf_node.tolist()):
+            i, j = int(self.node_robot[a]), int(self.node_robot[b])
+            x0, x1, y0, y1 = self.conf_span[m]
+            (ta0, ta1), (tb0, tb1) = (
+                self.paths[i].time_at([x0, x1]),
+                self.paths[j].time_at([y0, y1]),
+            )
+            conflict = {
+                "a": ids[a],
+                "b": ids[b],
+                "a_enter": float(ta0),
+                "a_exit": float(ta1),
+                "b_enter": float(tb0),
+                "b_exit": float(tb1),
+            }
+            if self.forced[m]:
+                conflict["first"] = "a" if self.forced[m] > 0 else "b"
+            conflicts.append(conflict)
+        return ScheduleRequest.model_validate(
+            {
+                "objective": base.objective,
+                "robots": robots,
+                "conflicts": conflicts,
+                "options": base.options.model_dump(),
+            }
+        )
+
+
+def build_graph(paths: Sequence[RobotPath], settings: GeometrySettings) -> CoordinationGraph:
+    """Derive the coordination graph of ``paths``.
+
+    Raises:
+        ProblemError: fixed paths leave no collision-free order (robots parked in
+            each other's way), naming the robots.
+    """
+    boxes = interference_boxes(paths, settings.resolution, settings.margin)
+    node_robot, node_span, box_node_i, box_node_j = _merge_nodes(boxes)
+    key = box_node_i * max(node_robot.size, 1) + box_node_j  # (B,)
+    order = np.argsort(key, kind="stable")
+    boxes, key = boxes.take(order), key[order]
+    box_node_i, box_node_j = box_node_i[order], box_node_j[order]
+    uniq, first = np.unique(key, return_index=True)  # (M,)
+    box_start = np.append(first, key.size)
+    conf_node = np.stack([box_node_i[first], box_node_j[first]], axis=1)  # (M, 2)
+    conf_span = _union_boxes(boxes, first)
+    graph = CoordinationGraph(
+        paths=tuple(paths),
+        node_robot=node_robot,
+        node_span=node_span,
+        node_density=_densities(node_robot.size, box_node_i, box_node_j, boxes.co_directional),
+        conf_node=conf_node,
+        conf_span=conf_span,
+        forced=_parked_orders(conf_span),
+        boxes=boxes,
+        box_start=box_start,
+    )
+    _check_fixed_orders(graph)
+    return graph
+
+
+def _merge_nodes(boxes: Boxes) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Merge each robot's box intervals into nodes (robots without boxes get none).
+
+    Returns node_robot (V,), node_span (V, 2), and the node of each box on side i
+    and on side j (B,) each.
+    """
+    robot = np.concatenate([boxes.i, boxes.j])  # (2B,)
+    lo = np.concatenate([boxes.x0, boxes.y0])
+    hi = np.concatenate([boxes.x1, boxes.y1])
+    order = np.lexsort((lo, robot))
+    robot_s, lo_s, hi_s = robot[order], lo[order], hi[order]
+    # A new node starts where the robot changes or the interval starts after every
+    # interval before it (of the same robot) has ended.
+    new = np.ones(robot_s.size, dtype=bool)
+    for r_start, r_end in _runs(robot_s):
+        reach = np.maximum.accumulate(hi_s[r_start:r_end])
+        new[r_start + 1 : r_end] = lo_s[r_start + 1 : r_end] > reach[:-1] + TOUCH_TOL
+    node_of_sorted = np.cumsum(new) - 1  # (2B,)
+    n_nodes = int(node_of_sorted[-1]) + 1 if new.size else 0
+    node_lo = np.full(n_nodes, np.inf)
+    node_hi = np.full(n_nodes, -np.inf)
+    np.minimum.at(node_lo, node_of_sorted, lo_s)
+    np.maximum.at(node_hi, node_of_sorted, hi_s)
+    node_robot = robot_s[new] if new.size else np.zeros(0, dtype=np.int64)
+    node_of = np.empty_like(node_of_sorted)
+    node_of[order] = node_of_sorted
+    return (
+        node_robot,
+        np.stack([node_lo, node_hi], axis=1),
+        node_of[: boxes.size],
+        node_of[boxes.size :],
+    )
+
+
+def _runs(sorted_keys: np.ndarray) -> list[tuple[int, int]]:
+    """(start, end) of each run of equal values in a sorted array."""
+    if sorted_keys.size == 0:
+        return []
+    cuts = np.flatnonzero(np.diff(sorted_keys)) + 1
+    bounds = np.concatenate([[0], cuts, [sorted_keys.size]])
+    return list(zip(bounds[:-1].tolist(), bounds[1:].tolist(), strict=True))
+
+
+def _union_boxes(boxes: Boxes, first: np.ndarray) -> np.ndarray:
+    """(M, 4) bounding box x0 x1 y0 y1 of each conflict's boxes (boxes sorted by conflict)."""
+    if first.size == 0:
+        return np.zeros((0, 4))
+    return np.stack(
+        [
+            np.minimum.reduceat(boxes.x0, first),
+            np.maximum.reduceat(boxes.x1, first),
+            np.minimum.reduceat(boxes.y0, first),
+            np.maximum.reduceat(boxes.y1, first),
+        ],
+        axis=1,
+    )
+
+
+def _densities(
+    n_nodes: int, node_i: np.ndarray, node_j: np.ndarray, co_directional: np.ndarray
+) -> np.ndarray:
+    """(V,) 2 where every box touching the node is co-directional, else 1."""
+    crossing = np.zeros(n_nodes, dtype=bool)
+    crossing[node_i[~co_directional]] = True
+    crossing[node_j[~co_directional]] = True
+    return np.where(crossing, 1, 2).astype(np.int64)
+
+
+def _parked_orders(conf_span: np.ndarray) -> np.ndarray:
+    """(M,) int8 fixed directions: a robot whose section starts at its first point goes first.
+
+    Side a is fixed first when its section starts at arc length 0, side b likewise;
+    both at once is a contradiction that :func:`_check_fixed_orders` reports.
+    """
+    a_parked = conf_span[:, 0] <= 0.0
+    b_parked = conf_span[:, 2] <= 0.0
+    return np.where(a_parked & b_parked, 2, a_parked.astype(np.int8) - b_parked).astype(np.int8)
+
+
+def _check_fixed_orders(graph: CoordinationGraph) -> None:
+    """Refuse paths whose fixed orders contradict each other (robots parked in each other's way).
+
+    Raises:
+        ProblemError: naming the robots of the first contradiction found.
+    """
+    ids = [p.id for p in graph.paths]
+    both = np.flatnonzero(graph.forced == 2)
+    if both.size:
+        i, j = graph.node_robot[graph.conf_node[both[0]]].tolist()
+        raise ProblemError(
+            [
+                ErrorItem(
+                    ("body", "robots", i, "path"),
+                    f"robots '{ids[i]}' and '{ids[j]}' each start inside the other's route "
+                    "(or their start footprints overlap): neither can pass the other; "
+                    "re-plan one of their paths",
+                )
+            ]
+        )
+    dag = nx.DiGraph()
+    chain = np.flatnonzero(graph.node_robot[1:] == graph.node_robot[:-1])
+    dag.add_edges_from(zip(chain.tolist(), (chain + 1).tolist(), strict=True))
+    fixed = np.flatnonzero(graph.forced != 0)
+    for m in fixed.tolist():
+        a, b = graph.conf_node[m].tolist()
+        dag.add_edge(*((a, b) if graph.forced[m] > 0 else (b, a)))
+    try:
+        cycle = nx.find_cycle(dag)
+    except nx.NetworkXNoCycle:
+        return
+    robots = list(dict.fromkeys(int(graph.node_robot[u]) for u, _ in cycle))
+    names = ", ".join(f"'{ids[r]}'" for r in robots)
+    raise ProblemError(
+        [
+            ErrorItem(
+                ("body", "robots", robots[0], "path"),
+                f"robots {names} wait at their starts in each other's routes in a circle: "
+                "no order lets them pass; re-plan one of their paths",
+            )
+        ]
+    )

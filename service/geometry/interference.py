@@ -1,0 +1,185 @@
+"""Where swept footprints interfere: boxes in the coordination space of each robot pair.
+
+Broad phase: shapely's STRtree finds, in one bulk query, the path segments of
+different robots whose bounding boxes, grown by the largest reach, overlap. Narrow
+phase (numba): segment A of robot i is cut into *pieces* of at most
+``resolution`` metres; for each piece, the stretch of segment B whose points lie
+closer than ``R = r_i + r_j + margin`` to the piece is the intersection of B's
+line with the piece's capsule of radius R, an interval found in closed form.
+Each (piece, stretch) is a *box* ``[x0, x1] x [y0, y1]`` in the pair's
+coordination space (arc lengths of i and j): the union of boxes is exactly the
+set of configurations where a point of i's piece is within R of j's position,
+so it covers every configuration where the two disks come within ``margin`` of
+touching. A schedule that keeps every pair out of its boxes' interiors never
+lets two disks overlap (the argument is in docs/paths.md).
+
+Resolution only coarsens the arc lengths of robot i (the lower index) by up to
+``resolution``; robot j's are exact.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+import shapely
+
+from service.geometry.paths import RobotPath
+
+__all__ = ["CO_DIRECTIONAL_DEG", "Boxes", "Segments", "interference_boxes"]
+
+# Two segments are co-directional when their headings differ by less than this (degrees):
+# robots then drive the shared section the same way and one may follow the other.
+CO_DIRECTIONAL_DEG = 30.0
+
+
+@dataclass(frozen=True, eq=False)
+class Segments:
+    """All robots' path segments, flattened. Shapes: G segments."""
+
+    robot: np.ndarray  # (G,) int
+    s0: np.ndarray  # (G,) float, arc length at the segment's start
+    length: np.ndarray  # (G,) float
+    p0: np.ndarray  # (G, 2) float
+    p1: np.ndarray  # (G, 2) float
+
+    @classmethod
+    def of(cls, paths: Sequence[RobotPath]) -> Segments:
+        """The segments of every path, robot by robot in path order."""
+        return cls(
+            np.concatenate([np.full(p.arc.size - 1, r) for r, p in enumerate(paths)]),
+            np.concatenate([p.arc[:-1] for p in paths]),
+            np.concatenate([np.diff(p.arc) for p in paths]),
+            np.concatenate([p.points[:-1] for p in paths]),
+            np.concatenate([p.points[1:] for p in paths]),
+        )
+
+    @property
+    def heading(self) -> np.ndarray:
+        """(G, 2) unit direction of travel."""
+        return (self.p1 - self.p0) / self.length[:, None]
+
+
+@dataclass(frozen=True, eq=False)
+class Boxes:
+    """Interfering (piece, stretch) pairs, each a box in its robot pair's coordination space.
+
+    Shapes: B boxes; side i is always the lower robot index (i < j).
+    """
+
+    i: np.ndarray  # (B,) int robot index
+    j: np.ndarray  # (B,) int robot index, > i
+    x0: np.ndarray  # (B,) float, robot i's piece [x0, x1]
+    x1: np.ndarray
+    y0: np.ndarray  # (B,) float, robot j's stretch [y0, y1]
+    y1: np.ndarray
+    co_directional: np.ndarray  # (B,) bool, headings within CO_DIRECTIONAL_DEG
+
+    @property
+    def size(self) -> int:
+        return int(self.i.size)
+
+    def take(self, index: np.ndarray) -> Boxes:
+        """The boxes at ``index`` (an int array or a boolean mask)."""
+        return Boxes(*(getattr(self, f)[index] for f in Boxes.__dataclass_fields__))
+
+
+@numba.njit(cache=True, nogil=True)
+def _line_capsule(
+    b0: np.ndarray, v: np.ndarray, a0: np.ndarray, a1: np.ndarray, reach: float
+) -> tuple[float, float]:
+    """Parameter interval (lo, hi) of the line b0 + t v (|v| = 1) inside the open capsule
+    of radius ``reach`` around segment a0-a1; lo >= hi when they do not meet."""
+    lo, hi = np.inf, -np.inf
+    for c in (a0, a1):  # the two end disks
+        w0, w1 = b0[0] - c[0], b0[1] - c[1]
+        beta = v[0] * w0 + v[1] * w1
+        disc = beta * beta - (w0 * w0 + w1 * w1 - reach * reach)
+        if disc > 0.0:
+            root = np.sqrt(disc)
+            lo, hi = min(lo, -beta - root), max(hi, -beta + root)
+    d0, d1 = a1[0] - a0[0], a1[1] - a0[1]
+    ell = np.sqrt(d0 * d0 + d1 * d1)
+    u0, u1 = d0 / ell, d1 / ell
+    w0, w1 = b0[0] - a0[0], b0[1] - a0[1]
+    # The rectangle: 0 <= along <= ell and |across| < reach, both linear in t.
+    t_lo, t_hi = -np.inf, np.inf
+    for base, slope, bound_lo, bound_hi in (
+        (u0 * w0 + u1 * w1, u0 * v[0] + u1 * v[1], 0.0, ell),
+        (-u1 * w0 + u0 * w1, -u1 * v[0] + u0 * v[1], -reach, reach),
+    ):
+        if abs(slope) < 1e-12:
+            if not bound_lo <= base <= bound_hi:
+                t_lo, t_hi = np.inf, -np.inf
+        else:
+            e0, e1 = (bound_lo - base) / slope, (bound_hi - base) / slope
+            t_lo, t_hi = max(t_lo, min(e0, e1)), min(t_hi, max(e0, e1))
+    if t_lo < t_hi:
+        lo, hi = min(lo, t_lo), max(hi, t_hi)
+    return lo, hi
+
+
+@numba.njit(cache=True, nogil=True)
+def _narrow_phase(
+    pair_a: np.ndarray,  # (C,) int segment of the lower robot
+    pair_b: np.ndarray,  # (C,) int segment of the higher robot
+    s0: np.ndarray,  # (G,) float
+    length: np.ndarray,  # (G,) float
+    p0: np.ndarray,  # (G, 2) float
+    p1: np.ndarray,  # (G, 2) float
+    reach: np.ndarray,  # (C,) float, r_i + r_j + margin
+    resolution: float,
+) -> tuple[np.ndarray, np.ndarray]:  # (B,) candidate index, (B, 4) x0 x1 y0 y1
+    out_pair = []
+    out_box = []
+    for c in range(pair_a.size):
+        a, b = pair_a[c], pair_b[c]
+        v = (p1[b] - p0[b]) / length[b]
+        n_pieces = max(1, int(np.ceil(length[a] / resolution)))
+        for k in range(n_pieces):
+            f0, f1 = k / n_pieces, (k + 1) / n_pieces
+            q0 = p0[a] + f0 * (p1[a] - p0[a])
+            q1 = p1[a] if k == n_pieces - 1 else p0[a] + f1 * (p1[a] - p0[a])
+            lo, hi = _line_capsule(p0[b], v, q0, q1, reach[c])
+            lo, hi = max(lo, 0.0), min(hi, length[b])
+            if lo < hi:
+                x1 = s0[a] + length[a] if k == n_pieces - 1 else s0[a] + f1 * length[a]
+                out_pair.append(c)
+                out_box.append((s0[a] + f0 * length[a], x1, s0[b] + lo, s0[b] + hi))
+    boxes = np.empty((len(out_box), 4))
+    for k in range(len(out_box)):
+        boxes[k, 0], boxes[k, 1], boxes[k, 2], boxes[k, 3] = out_box[k]
+    return np.array(out_pair, dtype=np.int64), boxes
+
+
+def interference_boxes(paths: Sequence[RobotPath], resolution: float, margin: float) -> Boxes:
+    """Every box where footprints of two robots come within ``margin`` of touching."""
+    segs = Segments.of(paths)
+    radius = np.array([p.radius for p in paths])  # (R,)
+    lo = np.minimum(segs.p0, segs.p1)  # (G, 2) bounding boxes
+    hi = np.maximum(segs.p0, segs.p1)
+    tree = shapely.STRtree(shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1]))
+    # Bounding boxes grown by the largest reach: a superset of the pairs within reach
+    # (a bulk ``dwithin`` query measured 20-50x slower); the narrow phase is exact.
+    grow = 2.0 * float(radius.max()) + margin
+    grown = shapely.box(lo[:, 0] - grow, lo[:, 1] - grow, hi[:, 0] + grow, hi[:, 1] + grow)
+    a, b = tree.query(grown)
+    keep = segs.robot[a] < segs.robot[b]  # each robot pair once, never a robot with itself
+    a, b = a[keep], b[keep]
+    reach = radius[segs.robot[a]] + radius[segs.robot[b]] + margin  # (C,)
+    cand, box = _narrow_phase(
+        a, b, segs.s0, segs.length, segs.p0, segs.p1, reach, float(resolution)
+    )
+    a, b = a[cand], b[cand]
+    cos = np.einsum("kd,kd->k", segs.heading[a], segs.heading[b])
+    return Boxes(
+        i=segs.robot[a],
+        j=segs.robot[b],
+        x0=box[:, 0],
+        x1=box[:, 1],
+        y0=box[:, 2],
+        y1=box[:, 3],
+        co_directional=cos > np.cos(np.radians(CO_DIRECTIONAL_DEG)),
+    )

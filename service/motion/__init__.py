@@ -1,0 +1,1 @@
+"""Motion: a schedule of a path-derived graph -> dependency plan -> executed trajectories."""

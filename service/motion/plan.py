@@ -1,0 +1,264 @@
+"""The paths form end to end: paths -> graph -> schedule -> executed, checked trajectories.
+
+:func:`plan_paths` is what ``POST /v1/schedules`` runs for a paths-form body:
+derive the coordination graph (geometry), solve it with the dispatcher (any
+solver, checked by the one constraint checker), turn the assignment into a
+dependency plan, execute it (simulation), and check the trajectories with the
+one clearance check. A plan that fails the clearance check or deadlocks is
+never returned: the same directions are tried with every conflict exclusive
+(safe by construction), and if even that failed the request fails loudly.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from service.core.path_schemas import (
+    CoordinationGraphResponse,
+    DependencyOut,
+    MotionChecksOut,
+    PathsRequest,
+    PathsScheduleResponse,
+    TrajectoryOut,
+    WaitPointOut,
+)
+from service.core.schemas import (
+    AssignmentOut,
+    CostsOut,
+    NodeTimesOut,
+    RobotScheduleOut,
+    ScheduleRequest,
+    ScheduleResponse,
+    SolverInfoOut,
+)
+from service.geometry.graph import CoordinationGraph, GeometrySettings, build_graph
+from service.geometry.paths import RobotPath
+from service.motion.dependencies import Decision, dependency_plan
+from service.motion.trajectories import departure_times, realized_costs, trajectories
+from service.simulation.clearance import Clearance, Trajectory, check_clearance
+from service.simulation.executor import DependencyPlan, Run, execute
+from service.solvers.dispatch import DispatchPolicy, InvalidAnswerError, dispatch
+
+__all__ = ["MOTION_SHARE", "coordination_graph", "plan_paths"]
+
+log = logging.getLogger(__name__)
+
+# Share of the request's time limit kept for execution and the clearance check after the
+# solve (measured: ~0.1-0.3 s at 250 robots, docs/paths.md), at least MIN_SOLVE_S to solve.
+MOTION_SHARE = 0.1
+MIN_SOLVE_S = 0.05
+
+
+@dataclass(frozen=True, eq=False)
+class _Executed:
+    """A decision that executed without deadlock and passed the clearance check."""
+
+    decision: Decision
+    plan: DependencyPlan
+    run: Run
+    trajectories: list[Trajectory]
+    clearance: Clearance
+
+
+def derive(request: PathsRequest, geometry: GeometrySettings) -> CoordinationGraph:
+    """The coordination graph of a paths-form request.
+
+    Raises:
+        ProblemError: fixed paths leave no collision-free order.
+    """
+    return build_graph([RobotPath.from_wire(r) for r in request.robots], geometry)
+
+
+def coordination_graph(
+    request: PathsRequest, geometry: GeometrySettings
+) -> CoordinationGraphResponse:
+    """What ``POST /v1/coordination-graphs`` answers: the graph and its node spans."""
+    graph = derive(request, geometry)
+    return CoordinationGraphResponse(
+        graph=graph.to_request(request),
+        node_spans=graph.node_spans(),
+        isolated_robots=graph.isolated_robots(),
+    )
+
+
+def plan_paths(
+    request: PathsRequest, policy: DispatchPolicy, geometry: GeometrySettings
+) -> PathsScheduleResponse:
+    """Schedule ``request`` and return trajectories that never collide.
+
+    Raises:
+        ProblemError: bad geometry (fixed paths leave no collision-free order).
+        InvalidAnswerError: not even the all-exclusive plan executed cleanly (a bug).
+    """
+    start = time.perf_counter()
+    graph = derive(request, geometry)
+    graph_request = graph.to_request(request)
+    limit = request.options.time_limit_s or policy.default_time_limit_s
+    answer: ScheduleResponse | None = None
+    if graph_request is not None:
+        left = limit * (1.0 - MOTION_SHARE) - (time.perf_counter() - start)
+        options = graph_request.options.model_copy(update={"time_limit_s": max(MIN_SOLVE_S, left)})
+        answer = dispatch(graph_request.model_copy(update={"options": options}), policy)
+    executed = _execute_safely(graph, _decision(graph, answer))
+    return _render(request, graph, graph_request, answer, executed, time.perf_counter() - start)
+
+
+def _decision(graph: CoordinationGraph, answer: ScheduleResponse | None) -> Decision:
+    """The dispatcher's assignment (in the graph's conflict order) as arrays."""
+    if answer is None:
+        return Decision(np.zeros(0, dtype=bool), np.zeros(0, dtype=bool))
+    ids = graph.node_ids()
+    a_first = np.array(
+        [
+            ids[a] == out.from_
+            for out, a in zip(answer.assignment, graph.conf_node[:, 0], strict=True)
+        ],
+        dtype=bool,
+    )
+    following = np.array([out.type == "following" for out in answer.assignment], dtype=bool)
+    return Decision(a_first, following)
+
+
+def _execute_safely(graph: CoordinationGraph, decision: Decision) -> _Executed:
+    """Execute ``decision``, or its all-exclusive version, whichever first runs clean."""
+    for candidate in (decision, decision.exclusive()):
+        plan = dependency_plan(graph, candidate)
+        run = execute(graph.paths, plan)
+        if run.deadlocked:
+            log.error("plan deadlocked (robots %s); trying all-exclusive", run.deadlocked[:10])
+            continue
+        trajs = trajectories(graph.paths, run)
+        clearance = check_clearance(trajs)
+        if clearance.ok:
+            return _Executed(candidate, plan, run, trajs, clearance)
+        log.error(
+            "plan failed the clearance check %s; trying all-exclusive", clearance.overlaps[:3]
+        )
+    raise InvalidAnswerError("no executable collision-free plan for a valid assignment")
+
+
+def _render(
+    request: PathsRequest,
+    graph: CoordinationGraph,
+    graph_request: ScheduleRequest | None,
+    answer: ScheduleResponse | None,
+    executed: _Executed,
+    runtime_s: float,
+) -> PathsScheduleResponse:
+    """The wire answer: the graph answer's fields, re-described by the executed motion."""
+    paths, run = graph.paths, executed.run
+    ids = graph.node_ids()
+    planned = _time_points(graph)
+    realized = [departure_times(run.wall[r], run.clock[r], planned[r]) for r in range(len(paths))]
+    costs = realized_costs(run.completion, planned, realized)
+    schedule = []
+    for r, path in enumerate(paths):
+        nodes = np.flatnonzero(graph.node_robot == r)
+        enter, exit_ = (
+            departure_times(run.wall[r], run.clock[r], path.time_at(graph.node_span[nodes, k]))
+            for k in (0, 1)
+        )
+        schedule.append(
+            RobotScheduleOut(
+                robot=path.id,
+                completion=float(run.completion[r]),
+                delay=float(run.completion[r] - path.finish_time),
+                nodes=[
+                    NodeTimesOut(id=ids[v], enter=float(a), exit=float(b))
+                    for v, a, b in zip(nodes.tolist(), enter.tolist(), exit_.tolist(), strict=True)
+                ],
+            )
+        )
+    return PathsScheduleResponse(
+        objective=request.objective,
+        cost=costs[request.objective],
+        costs=CostsOut(**costs),
+        assignment=_assignment(graph, executed.decision),
+        schedule=schedule,
+        solver=_solver_info(answer, executed, runtime_s),
+        checks=MotionChecksOut(
+            acyclic=True if answer is None else answer.checks.acyclic,
+            density=True if answer is None else answer.checks.density,
+            forced=True if answer is None else answer.checks.forced,
+            collision_free=executed.clearance.ok,
+            min_clearance_m=executed.clearance.min_gap,
+        ),
+        graph=graph_request,
+        node_spans=graph.node_spans(),
+        trajectories=[
+            TrajectoryOut(
+                robot=path.id,
+                points=np.column_stack([tr.t, tr.xy]).tolist(),
+            )
+            for path, tr in zip(paths, executed.trajectories, strict=True)
+        ],
+        dependencies=_dependencies(paths, executed.plan),
+    )
+
+
+def _time_points(graph: CoordinationGraph) -> list[np.ndarray]:
+    """Per robot (P_r,) its planned time points (contract): node and pair ends, goal."""
+    arcs: list[list[np.ndarray]] = [[np.array([p.length])] for p in graph.paths]
+    for v, r in enumerate(graph.node_robot.tolist()):
+        arcs[r].append(graph.node_span[v])
+    for m in range(graph.n_conflicts):
+        i, j = graph.node_robot[graph.conf_node[m]].tolist()
+        arcs[i].append(graph.conf_span[m, :2])
+        arcs[j].append(graph.conf_span[m, 2:])
+    return [np.unique(p.time_at(np.concatenate(a))) for p, a in zip(graph.paths, arcs, strict=True)]
+
+
+def _assignment(graph: CoordinationGraph, decision: Decision) -> list[AssignmentOut]:
+    """The executed decision in the wire format, in the graph's conflict order."""
+    ids = graph.node_ids()
+    out = []
+    for m, (a, b) in enumerate(graph.conf_node.tolist()):
+        first, second = (a, b) if decision.a_first[m] else (b, a)
+        kind = "following" if decision.following[m] else "exclusive"
+        out.append(AssignmentOut(from_=ids[first], to=ids[second], type=kind))
+    return out
+
+
+def _solver_info(
+    answer: ScheduleResponse | None, executed: _Executed, runtime_s: float
+) -> SolverInfoOut:
+    """The graph solver's info, noting when the plan had to be executed all-exclusive."""
+    if answer is None:
+        return SolverInfoOut(
+            name="none", optimal=True, runtime_s=runtime_s, detail="no two robots interfere"
+        )
+    info = answer.solver.model_copy(update={"runtime_s": runtime_s})
+    if bool(np.any(executed.decision.following != _decision_types(answer))):
+        info = info.model_copy(
+            update={"optimal": False, "detail": "executed with every conflict exclusive"}
+        )
+    return info
+
+
+def _decision_types(answer: ScheduleResponse) -> np.ndarray:
+    return np.array([out.type == "following" for out in answer.assignment], dtype=bool)
+
+
+def _dependencies(paths: tuple[RobotPath, ...], plan: DependencyPlan) -> list[DependencyOut]:
+    """Per robot, its wait points in path order with whom it waits for."""
+    out = []
+    for r, path in enumerate(paths):
+        mine = np.flatnonzero(plan.waiter == r)
+        waits = []
+        for s in np.unique(plan.wait_s[mine]).tolist():
+            at = mine[plan.wait_s[mine] == s]
+            after: dict[int, float] = {}
+            for c in at.tolist():
+                w = int(plan.waitee[c])
+                after[w] = max(after.get(w, 0.0), float(plan.until_s[c]))
+            waits.append(
+                WaitPointOut(
+                    s=s, after=[{"robot": paths[w].id, "s": u} for w, u in sorted(after.items())]
+                )
+            )
+        out.append(DependencyOut(robot=path.id, waits=waits))
+    return out

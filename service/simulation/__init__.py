@@ -1,0 +1,1 @@
+"""Simulation: a kinematic executor of dependency plans, disturbances, and the clearance check."""

@@ -1,0 +1,116 @@
+"""The one clearance check: do executed trajectories keep every two footprints apart?
+
+Independent of how trajectories were made (it reads only timed waypoints and
+radii): for every two robots present at the same time and near each other
+(broad phase: STRtree over trajectory bounding boxes), it merges their waypoint
+times and, on each interval where both move linearly, finds the least centre
+distance in closed form (numba). A robot counts as present from its first
+waypoint's time to its last, both included (stricter than "gone at its goal").
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+import shapely
+
+__all__ = ["Clearance", "Trajectory", "check_clearance"]
+
+# Overlap tolerance, metres: gaps above -TOLERANCE count as clear (floating-point rounding
+# of positions interpolated from times of order 1e5 s).
+TOLERANCE = 1e-6
+
+
+@dataclass(frozen=True, eq=False)
+class Trajectory:
+    """Timed waypoints of one disk robot; linear motion in between. Shapes: K waypoints."""
+
+    t: np.ndarray  # (K,) non-decreasing
+    xy: np.ndarray  # (K, 2)
+    radius: float
+
+
+@dataclass(frozen=True)
+class Clearance:
+    """Least gap (centre distance minus radii) over all pairs present together, and where."""
+
+    min_gap: float | None  # None when no two robots are ever present together nearby
+    pair: tuple[int, int] | None
+    time: float | None
+    overlaps: tuple[tuple[int, int, float, float], ...]  # (i, j, time, gap) with gap < -TOL
+
+    @property
+    def ok(self) -> bool:
+        return not self.overlaps
+
+
+@numba.njit(cache=True, nogil=True)
+def _pair_min_gap(
+    ta: np.ndarray, pa: np.ndarray, tb: np.ndarray, pb: np.ndarray, radii: float
+) -> tuple[float, float]:
+    """Least centre distance minus ``radii`` of two waypoint lists over their common time,
+    and when. (inf, nan) if they are never present together."""
+    t0, t1 = max(ta[0], tb[0]), min(ta[-1], tb[-1])
+    if t0 > t1:
+        return np.inf, np.nan
+    ia = max(np.searchsorted(ta, t0, side="right") - 1, 0)
+    ib = max(np.searchsorted(tb, t0, side="right") - 1, 0)
+    best, when, t = np.inf, np.nan, t0
+    while True:
+        na = ta[ia + 1] if ia + 1 < ta.size else np.inf
+        nb = tb[ib + 1] if ib + 1 < tb.size else np.inf
+        u = min(na, nb, t1)
+        qa0, qa1 = _at(ta, pa, ia, t), _at(ta, pa, ia, u)
+        qb0, qb1 = _at(tb, pb, ib, t), _at(tb, pb, ib, u)
+        d0 = qa0 - qb0  # relative position, linear from d0 (at t) to d1 (at u)
+        d1 = qa1 - qb1
+        dd = d1 - d0
+        denom = dd[0] * dd[0] + dd[1] * dd[1]
+        f = 0.0 if denom <= 0.0 else min(1.0, max(0.0, -(d0[0] * dd[0] + d0[1] * dd[1]) / denom))
+        gap = np.sqrt((d0[0] + f * dd[0]) ** 2 + (d0[1] + f * dd[1]) ** 2) - radii
+        if gap < best:
+            best, when = gap, t + f * (u - t)
+        if u >= t1:
+            return best, when
+        if na <= u:
+            ia += 1
+        if nb <= u:
+            ib += 1
+        t = u
+
+
+@numba.njit(cache=True, nogil=True)
+def _at(ts: np.ndarray, ps: np.ndarray, k: int, t: float) -> np.ndarray:
+    """Position at time t on the waypoint interval k (clamped to its ends)."""
+    if k + 1 >= ts.size or ts[k + 1] <= ts[k]:
+        return ps[k].copy()
+    f = min(1.0, max(0.0, (t - ts[k]) / (ts[k + 1] - ts[k])))
+    return ps[k] + f * (ps[k + 1] - ps[k])
+
+
+def check_clearance(trajectories: Sequence[Trajectory]) -> Clearance:
+    """Check every two trajectories for overlapping footprints while both are present."""
+    if len(trajectories) < 2:
+        return Clearance(None, None, None, ())
+    lo = np.array([tr.xy.min(axis=0) - tr.radius for tr in trajectories])  # (R, 2)
+    hi = np.array([tr.xy.max(axis=0) + tr.radius for tr in trajectories])
+    boxes = shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1])
+    a, b = shapely.STRtree(boxes).query(boxes)
+    keep = a < b
+    best: tuple[float, int, int, float] | None = None
+    overlaps = []
+    for i, j in zip(a[keep].tolist(), b[keep].tolist(), strict=True):
+        ti, tj = trajectories[i], trajectories[j]
+        gap, when = _pair_min_gap(ti.t, ti.xy, tj.t, tj.xy, ti.radius + tj.radius)
+        if not np.isfinite(gap):
+            continue
+        if best is None or gap < best[0]:
+            best = (gap, i, j, when)
+        if gap < -TOLERANCE:
+            overlaps.append((i, j, float(when), float(gap)))
+    if best is None:
+        return Clearance(None, None, None, ())
+    return Clearance(float(best[0]), (best[1], best[2]), float(best[3]), tuple(overlaps))

@@ -1,0 +1,233 @@
+"""The kinematic executor: robots drive their paths and wait where their dependencies say.
+
+A :class:`DependencyPlan` is a list of constraints "robot ``waiter`` may not pass
+arc length ``wait_s`` until robot ``waitee`` has reached arc length ``until_s``"
+(a robot that has finished has reached every point). Each robot drives its path
+at its planned speed, from its start time (where it is present, standing at its
+first point), as far as its unsatisfied constraints allow, and waits exactly at
+the nearest blocking ``wait_s``. Disturbances (:mod:`.disturbances`) slow or stop
+robots. The run is event-driven and exact (no time step): events are a robot
+reaching a wait point, a release threshold or its goal.
+
+Executing a plan built from an acyclic schedule never deadlocks (docs/paths.md);
+should it happen anyway, the run reports the robots that never finished.
+"""
+
+from __future__ import annotations
+
+import heapq
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from service.geometry.paths import RobotPath
+from service.simulation.disturbances import Rate
+
+__all__ = ["DependencyPlan", "Run", "execute"]
+
+
+@dataclass(frozen=True, eq=False)
+class DependencyPlan:
+    """Constraints: ``waiter`` may not pass ``wait_s`` until ``waitee`` has reached ``until_s``.
+
+    Shapes: D constraints, arc lengths in metres on each robot's own path.
+    """
+
+    waiter: np.ndarray  # (D,) int
+    wait_s: np.ndarray  # (D,) float
+    waitee: np.ndarray  # (D,) int
+    until_s: np.ndarray  # (D,) float
+
+    @classmethod
+    def empty(cls) -> DependencyPlan:
+        return cls(*(np.zeros(0, dtype=t) for t in (np.int64, float, np.int64, float)))
+
+    @property
+    def size(self) -> int:
+        return int(self.waiter.size)
+
+
+@dataclass(frozen=True, eq=False)
+class Run:
+    """What happened. Per robot r: waypoints (wall time, arc length), motion in between
+    follows the planned speed profile scaled by the progress rate."""
+
+    wall: list[np.ndarray]  # R arrays (K_r,) wall times, non-decreasing
+    clock: list[np.ndarray]  # R arrays (K_r,) progress clock (planned time) at those walls
+    completion: np.ndarray  # (R,) wall time at the last point; NaN if it never got there
+    deadlocked: tuple[int, ...]  # robots that never finished
+
+    def arcs(self, paths: Sequence[RobotPath]) -> list[np.ndarray]:
+        """(K_r,) arc length at every waypoint of every robot."""
+        return [p.arc_at(c) for p, c in zip(paths, self.clock, strict=True)]
+
+
+class _Executor:
+    """State of one run; :func:`execute` is the public entry."""
+
+    def __init__(self, paths: Sequence[RobotPath], plan: DependencyPlan, rates: Sequence[Rate]):
+        self.paths, self.plan, self.rates = paths, plan, rates
+        n = len(paths)
+        self.clock = np.array([p.start_time for p in paths])  # progress clock at self.wall
+        self.wall = self.clock.copy()
+        self.moving = np.zeros(n, dtype=bool)
+        self.started = np.zeros(n, dtype=bool)
+        self.done = np.zeros(n, dtype=bool)
+        self.version = np.zeros(n, dtype=np.int64)
+        self.target = self.clock.copy()  # progress clock of each moving robot's next event
+        self.records: list[list[tuple[float, float]]] = [[] for _ in range(n)]
+        self.completion = np.full(n, np.nan)
+        self.satisfied = np.zeros(plan.size, dtype=bool)
+        # Per waiter, a heap of (wait_s, constraint); its limit is the least unsatisfied one.
+        self.blocking: list[list[tuple[float, int]]] = [[] for _ in range(n)]
+        for c in range(plan.size):
+            self.blocking[plan.waiter[c]].append((float(plan.wait_s[c]), c))
+        for heap in self.blocking:
+            heapq.heapify(heap)
+        # Per waitee, its release thresholds as progress-clock values, sorted.
+        until_clock = np.empty(plan.size)
+        for r in range(n):
+            mine = plan.waitee == r
+            until_clock[mine] = paths[r].time_at(plan.until_s[mine])
+        order = np.lexsort((until_clock, plan.waitee))
+        self.release_order = order
+        self.release_clock = until_clock[order]
+        self.release_start = np.searchsorted(plan.waitee[order], np.arange(n + 1))
+        self.next_release = self.release_start[:-1].copy()
+        self.events: list[tuple[float, int, int, int, float]] = []
+        self.seq = 0
+
+    def run(self) -> Run:
+        for r, path in enumerate(self.paths):
+            self._push(path.start_time, r, -1, path.start_time)
+        while self.events:
+            wall, _, r, version, clock = heapq.heappop(self.events)
+            if version == -1:
+                self._start(r)
+            elif version == self.version[r]:
+                self._arrive(r, wall, clock)
+        return self._result()
+
+    def _push(self, wall: float, r: int, version: int, clock: float) -> None:
+        heapq.heappush(self.events, (wall, self.seq, r, version, clock))
+        self.seq += 1
+
+    def _limit_clock(self, r: int) -> float:
+        """Progress clock of robot r's nearest blocking wait point (its finish if none)."""
+        heap = self.blocking[r]
+        while heap and self.satisfied[heap[0][1]]:
+            heapq.heappop(heap)
+        path = self.paths[r]
+        return float(path.time_at(heap[0][0])) if heap else path.finish_time
+
+    def _schedule(self, r: int) -> None:
+        """Robot r moves from (wall, clock): push its next event, or stop it at its limit."""
+        limit = self._limit_clock(r)
+        if limit <= self.clock[r]:
+            if self.moving[r]:
+                self.moving[r] = False
+                self._record(r)
+            return
+        if not self.moving[r]:
+            self.moving[r] = True
+            self._record(r)
+        target = min(limit, self.paths[r].finish_time)
+        k = self.next_release[r]
+        if k < self.release_start[r + 1]:
+            target = min(target, self.release_clock[k])
+        self.version[r] += 1
+        self.target[r] = target
+        gain = target - self.clock[r]
+        self._push(self.rates[r].advance(self.wall[r], gain), r, int(self.version[r]), target)
+
+    def _start(self, r: int) -> None:
+        """Robot r appears at its first point at its start time."""
+        self.started[r] = True
+        self._record(r)
+        self._release(r)
+        self._schedule(r)
+
+    def _arrive(self, r: int, wall: float, clock: float) -> None:
+        """Robot r reached progress ``clock`` at ``wall``: release, finish or go on."""
+        self.wall[r], self.clock[r] = wall, clock
+        if clock >= self.paths[r].finish_time:
+            self.done[r], self.moving[r] = True, False
+            self.completion[r] = wall
+            self._record(r)
+        self._release(r)
+        if not self.done[r]:
+            self._schedule(r)
+
+    def _release(self, r: int) -> None:
+        """Satisfy the constraints robot r has now reached and update their waiters."""
+        k, end = self.next_release[r], self.release_start[r + 1]
+        waiters: set[int] = set()
+        while k < end and (self.done[r] or self.release_clock[k] <= self.clock[r]):
+            c = self.release_order[k]
+            self.satisfied[c] = True
+            waiters.add(int(self.plan.waiter[c]))
+            k += 1
+        self.next_release[r] = k
+        for w in sorted(waiters):
+            self._wake(w, self.wall[r])
+
+    def _wake(self, w: int, wall: float) -> None:
+        """Robot w's limit may have moved on at ``wall``: bring it up to date and reschedule."""
+        if not self.started[w] or self.done[w]:
+            return
+        if self.moving[w]:  # never past its pending event (rounding of advance/progress)
+            gained = self.clock[w] + self.rates[w].progress(self.wall[w], wall)
+            self.clock[w] = min(gained, self.target[w])
+        self.wall[w] = wall
+        self._schedule(w)
+
+    def _record(self, r: int) -> None:
+        self.records[r].append((float(self.wall[r]), float(self.clock[r])))
+
+    def _result(self) -> Run:
+        walls, clocks = [], []
+        for r, path in enumerate(self.paths):
+            wall, clock = _expand(self.records[r], path, self.rates[r])
+            walls.append(wall)
+            clocks.append(clock)
+        stuck = tuple(int(r) for r in np.flatnonzero(~self.done))
+        return Run(walls, clocks, self.completion, stuck)
+
+
+def _expand(
+    records: list[tuple[float, float]], path: RobotPath, rate: Rate
+) -> tuple[np.ndarray, np.ndarray]:
+    """Waypoints (wall, clock) between which motion is linear in the plane.
+
+    Between two records a robot either stood still (equal clocks) or moved; inside
+    a move, path vertices (speed or heading changes) and rate changes are added.
+    """
+    walls: list[float] = []
+    clocks: list[float] = []
+    for (w0, c0), (w1, c1) in zip(records[:-1], records[1:], strict=True):
+        walls.append(w0)
+        clocks.append(c0)
+        if c1 <= c0:
+            continue
+        inner_clock = path.times[(path.times > c0) & (path.times < c1)]
+        inner_wall = [rate.advance(w0, c - c0) for c in inner_clock]
+        bp = rate.breakpoints(w0, w1)
+        walls.extend(inner_wall + bp.tolist())
+        clocks.extend(inner_clock.tolist() + [c0 + rate.progress(w0, b) for b in bp])
+    if records:
+        walls.append(records[-1][0])
+        clocks.append(records[-1][1])
+    wall, clock = np.asarray(walls), np.asarray(clocks)
+    order = np.lexsort((clock, wall))
+    wall, clock = wall[order], clock[order]
+    keep = np.ones(wall.size, dtype=bool)
+    keep[1:] = (np.diff(wall) > 0) | (np.diff(clock) > 0)
+    return wall[keep], clock[keep]
+
+
+def execute(
+    paths: Sequence[RobotPath], plan: DependencyPlan, rates: Sequence[Rate] | None = None
+) -> Run:
+    """Run ``plan`` on ``paths`` (optionally disturbed by one :class:`Rate` per robot)."""
+    return _Executor(paths, plan, rates or [Rate()] * len(paths)).run()
