@@ -47,8 +47,10 @@ WAIT_EDGE_WIDTH = 3.0
 CAPTION_FONT_SIZE = 9
 CAPTION_POSITION = (0.01, 0.99)  # axes fraction, top left
 AXES_MARGIN = 0.02  # figure fraction around the floor
-# One palette for the whole GIF, built from this many evenly spaced frames: 64
-# colours hold the robot colours and the antialiased edges without dithering noise.
+# One palette for the whole GIF, built by Pillow's fast octree from a few evenly
+# spaced frames. Measured on 3 and 300 robots (200 frames): 64 colours give files
+# ~25 % smaller than 255, a mean error under 4/255 and a white that stays white
+# (median cut tinted it).
 PALETTE_COLOURS = 64
 PALETTE_SAMPLE_FRAMES = 8
 MS_PER_S = 1000.0
@@ -214,7 +216,7 @@ def _save_gif(frames: Frames, path: Path, fps: float) -> None:
     """
     sample = np.linspace(0, len(frames) - 1, min(PALETTE_SAMPLE_FRAMES, len(frames))).astype(int)
     palette = Image.fromarray(np.vstack([frames[k] for k in sample])).quantize(
-        PALETTE_COLOURS, method=Image.Quantize.MEDIANCUT
+        PALETTE_COLOURS, method=Image.Quantize.FASTOCTREE
     )
     images = [
         Image.fromarray(frame).quantize(palette=palette, dither=Image.Dither.NONE)

@@ -54,6 +54,9 @@ GRID_ALPHA = 0.3
 SPAN_HALF_HEIGHT = 0.35
 NODE_HALF_HEIGHT = 0.25
 WAIT_HALF_HEIGHT = 0.15
+# Waits lie on the light span bar or on a node box: a white ground keeps the
+# orange hatching visible on both.
+WAIT_FILL = "white"
 SPAN_ALPHA = 0.35
 SPAN_LEGEND_COLOUR = "0.5"
 NODE_EDGE_COLOUR = "0.2"
@@ -119,21 +122,22 @@ def _draw_nodes(axes: Axes, response: Json, row_of: dict[str, int]) -> list[Cate
     return sorted(boxes)
 
 
-def _draw_waits(axes: Axes, response: Json, row_of: dict[str, int]) -> None:
-    """Waits (standing still before finishing) as hatched orange boxes."""
+def _draw_waits(axes: Axes, response: Json, row_of: dict[str, int]) -> bool:
+    """Waits (standing still before finishing) as hatched orange boxes; whether any."""
     waits = [(row_of[r], *w) for r, intervals in robot_waits(response).items() for w in intervals]
     axes.add_collection(
         PolyCollection(
             _rectangles(waits, WAIT_HALF_HEIGHT),
-            facecolors="none",
+            facecolors=WAIT_FILL,
             edgecolors=WAIT_COLOUR,
             hatch=WAIT_HATCH,
         )
     )
+    return bool(waits)
 
 
-def _draw_completions(axes: Axes, response: Json, row_of: dict[str, int]) -> None:
-    """Each scheduled completion as a black tick on its row."""
+def _draw_completions(axes: Axes, response: Json, row_of: dict[str, int]) -> bool:
+    """Each scheduled completion as a black tick on its row; whether any."""
     finished = completions(response)
     axes.scatter(
         list(finished.values()),
@@ -143,25 +147,39 @@ def _draw_completions(axes: Axes, response: Json, row_of: dict[str, int]) -> Non
         c=COMPLETION_COLOUR,
         zorder=3,
     )
+    return bool(finished)
 
 
 def _label_rows(axes: Axes, robots: list[str]) -> None:
-    """Robot ids on the y axis (every k-th one when there are many), first robot on top."""
+    """Robot ids on the y axis (every k-th one when there are many), first robot on top.
+
+    A chart with thinned labels is tall: it gets the time axis at the top too.
+    """
     step = max(1, math.ceil(len(robots) / MAX_ROW_LABELS))
     axes.set_yticks(range(0, len(robots), step), robots[::step], fontsize=ROW_LABEL_FONT_SIZE)
     axes.set_ylim(len(robots) - 0.5, -0.5)
+    axes.tick_params(axis="x", labeltop=step > 1, top=step > 1)
 
 
-def _legend_handles(categories: list[Category]) -> list[Line2D | Patch]:
-    """Proxy artists for the legend: span, the node colours drawn, wait, completion."""
-    return [
+def _legend_handles(
+    categories: list[Category], has_waits: bool, has_completions: bool
+) -> list[Line2D | Patch]:
+    """Proxy artists for the legend: the span, and the node colours, waits, completions drawn."""
+    handles: list[Line2D | Patch] = [
         Patch(facecolor=SPAN_LEGEND_COLOUR, alpha=SPAN_ALPHA, label="present (robot colour)"),
         *(Patch(facecolor=TYPE_COLOURS[c], label=f"node: {TYPE_LABELS[c]}") for c in categories),
-        Patch(facecolor="none", edgecolor=WAIT_COLOUR, hatch=WAIT_HATCH, label="wait"),
-        Line2D(
-            [], [], color=COMPLETION_COLOUR, ls="", marker=COMPLETION_MARKER, label="completion"
-        ),
     ]
+    if has_waits:
+        handles.append(
+            Patch(facecolor=WAIT_FILL, edgecolor=WAIT_COLOUR, hatch=WAIT_HATCH, label="wait")
+        )
+    if has_completions:
+        handles.append(
+            Line2D(
+                [], [], color=COMPLETION_COLOUR, ls="", marker=COMPLETION_MARKER, label="completion"
+            )
+        )
+    return handles
 
 
 def draw_gantt(response: Json, path: str | Path = "gantt.png") -> Path:
@@ -179,13 +197,13 @@ def draw_gantt(response: Json, path: str | Path = "gantt.png") -> Path:
     axes = figure.add_subplot()
     _draw_spans(axes, response, row_of)
     categories = _draw_nodes(axes, response, row_of)
-    _draw_waits(axes, response, row_of)
-    _draw_completions(axes, response, row_of)
+    has_waits = _draw_waits(axes, response, row_of)
+    has_completions = _draw_completions(axes, response, row_of)
     _label_rows(axes, robots)
     axes.autoscale_view(scaley=False)
     axes.set_xlabel("time (s)")
     axes.grid(axis="x", alpha=GRID_ALPHA)
-    handles = _legend_handles(categories)
+    handles = _legend_handles(categories, has_waits, has_completions)
     figure.legend(
         handles=handles, loc="outside upper center", ncols=len(handles), fontsize=LEGEND_FONT_SIZE
     )

@@ -47,7 +47,7 @@ PATH_WIDTH = 1.0
 SECTION_WIDTH = 4.0
 SECTION_ALPHA = 0.6
 FOOTPRINT_ALPHA = 0.25
-MARKER_SIZE = 30
+MARKER_SIZE = 30  # points^2, shrunk as 1/robots beyond MAX_LABELLED_ROBOTS
 START_MARKER = "o"
 GOAL_MARKER = "X"
 LEGEND_FONT_SIZE = 8
@@ -98,8 +98,9 @@ def _draw_robots(axes: Axes, request: Json) -> None:
     axes.add_collection(LineCollection(list(paths.values()), colors=robot_colour, lw=PATH_WIDTH))
     starts = np.array([path[0] for path in paths.values()])
     goals = np.array([path[-1] for path in paths.values()])
-    axes.scatter(*starts.T, s=MARKER_SIZE, marker=START_MARKER, c=robot_colour, zorder=3)
-    axes.scatter(*goals.T, s=MARKER_SIZE, marker=GOAL_MARKER, c=robot_colour, zorder=3)
+    size = MARKER_SIZE * min(1.0, MAX_LABELLED_ROBOTS / len(paths))
+    axes.scatter(*starts.T, s=size, marker=START_MARKER, c=robot_colour, zorder=3)
+    axes.scatter(*goals.T, s=size, marker=GOAL_MARKER, c=robot_colour, zorder=3)
     footprints = [
         Circle(tuple(start), robot["radius"])
         for start, robot in zip(starts, request["robots"], strict=True)
