@@ -254,8 +254,8 @@ def write_gif(
     """
     if fps <= 0 or max_frames < 2:
         raise ValueError(f"need fps > 0 and max_frames >= 2, got {fps} and {max_frames}")
-    if not trajectories(response):
-        raise ValueError("the response has no trajectories to animate")
+    if not set(trajectories(response)) & {robot["id"] for robot in request["robots"]}:
+        raise ValueError("the response has no trajectory of a robot in the request to animate")
     times = frame_times(response, fps, max_frames)
     path = Path(path)
     _save_gif(_render_frames(request, response, world, times, fps), path, fps)

@@ -100,3 +100,8 @@ def test_cli_writes_the_chosen_pictures(
     ]
     main([*args, f"--out={tmp_path / 'gantt_only'}", "--what", "gantt"])
     assert [p.name for p in (tmp_path / "gantt_only").iterdir()] == ["gantt.png"]
+
+
+def test_gif_needs_a_trajectory_of_a_known_robot(request_body: Json, tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="no trajectory"):
+        write_gif(request_body, {"trajectories": []}, path=tmp_path / "run.gif")

@@ -52,3 +52,10 @@ def test_bounds_from_world_or_from_paths(request_body: Json, world_body: Json) -
     assert plot_bounds(request_body, world_body) == (-1, -6, 11, 6)
     # Paths span x 0..10, y -5..5: margin 5 % of 10 m plus the largest radius 0.5 m.
     assert plot_bounds(request_body) == pytest.approx((-1.0, -6.0, 11.0, 6.0))
+
+
+def test_sections_without_assignment_are_unassigned(
+    request_body: Json, response_body: Json
+) -> None:
+    del response_body["assignment"]
+    assert list(conflict_sections(request_body, response_body)) == ["unassigned"]
