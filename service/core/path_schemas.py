@@ -33,8 +33,14 @@ __all__ = [
     "PathsRequest",
     "TrajectoryOut",
     "MotionChecksOut",
-    "DependencyOut",
-    "WaitPointOut",
+    "Dependency",
+    "WaitPoint",
+    "WaitAfter",
+    "DisturbanceIn",
+    "TrajectoryIn",
+    "SimulationRequest",
+    "OverlapOut",
+    "SimulationResponse",
     "PathsScheduleResponse",
     "CoordinationGraphResponse",
 ]
@@ -159,20 +165,31 @@ class MotionChecksOut(ChecksOut):
     )
 
 
-class WaitPointOut(BaseModel):
+class WaitAfter(BaseModel):
+    """Robot ``robot`` must have reached arc length ``s`` (metres) on its path."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    robot: Id
+    s: float = Field(ge=0.0, allow_inf_nan=False)
+
+
+class WaitPoint(BaseModel):
     """A point where a robot may have to wait until other robots have passed theirs."""
 
-    s: float = Field(description="Arc length on the robot's path where it waits, metres.")
-    after: list[dict[str, float | str]] = Field(
-        description="Each entry {robot, s}: that robot must have reached arc length s."
-    )
+    model_config = ConfigDict(extra="forbid")
+
+    s: float = Field(ge=0.0, allow_inf_nan=False, description="Arc length where it waits, m.")
+    after: list[WaitAfter]
 
 
-class DependencyOut(BaseModel):
-    """One robot's dependency plan: its wait points in path order."""
+class Dependency(BaseModel):
+    """One robot's dependency plan: its wait points in path order (executable without clocks)."""
 
-    robot: str
-    waits: list[WaitPointOut]
+    model_config = ConfigDict(extra="forbid")
+
+    robot: Id
+    waits: list[WaitPoint]
 
 
 class PathsScheduleResponse(BaseModel):
@@ -192,7 +209,7 @@ class PathsScheduleResponse(BaseModel):
     graph: ScheduleRequest | None
     node_spans: dict[str, tuple[float, float]]
     trajectories: list[TrajectoryOut]
-    dependencies: list[DependencyOut]
+    dependencies: list[Dependency]
 
 
 class CoordinationGraphResponse(BaseModel):
@@ -201,3 +218,78 @@ class CoordinationGraphResponse(BaseModel):
     graph: ScheduleRequest | None
     node_spans: dict[str, tuple[float, float]]
     isolated_robots: list[str]
+
+
+class DisturbanceIn(BaseModel):
+    """From ``start`` for ``duration`` seconds, robot ``robot`` moves at ``factor`` of its speed.
+
+    ``factor`` 0 (the default) is a stop; a stop from the robot's start time is a late start.
+    """
+
+    model_config = ConfigDict(extra="forbid")
+
+    robot: Id
+    start: Time
+    duration: float = Field(gt=0.0, le=MAX_TIME, allow_inf_nan=False)
+    factor: float = Field(default=0.0, ge=0.0, lt=1.0, allow_inf_nan=False)
+
+
+class TrajectoryIn(BaseModel):
+    """Timed waypoints ``[t, x, y]`` of one robot to play back (times non-decreasing)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    robot: Id
+    points: list[tuple[Time, Coordinate, Coordinate]] = Field(min_length=1)
+
+    @field_validator("points")
+    @classmethod
+    def _ordered(cls, points: list[tuple[float, float, float]]) -> list[tuple[float, float, float]]:
+        """Waypoint times may repeat (an instant) but never go back."""
+        for k in range(1, len(points)):
+            if points[k][0] < points[k - 1][0]:
+                raise ValueError(f"points[{k}] has time {points[k][0]} < points[{k - 1}]'s")
+        return points
+
+
+class SimulationRequest(BaseModel):
+    """Body of ``POST /v1/simulations``: play back trajectories, or execute a dependency plan.
+
+    Exactly one of ``trajectories`` (playback) and ``dependencies`` (execution, with
+    optional ``disturbances``) is given, for the robots of ``robots``.
+    """
+
+    model_config = ConfigDict(extra="forbid")
+
+    robots: list[PathRobotIn] = Field(min_length=1)
+    trajectories: list[TrajectoryIn] | None = None
+    dependencies: list[Dependency] | None = None
+    disturbances: list[DisturbanceIn] = Field(default_factory=list)
+
+    @model_validator(mode="after")
+    def _one_mode(self) -> SimulationRequest:
+        """Playback or execution, not both; disturbances only disturb an execution."""
+        if (self.trajectories is None) == (self.dependencies is None):
+            raise ValueError("give exactly one of 'trajectories' and 'dependencies'")
+        if self.trajectories is not None and self.disturbances:
+            raise ValueError("'disturbances' apply to 'dependencies' (an execution), not playback")
+        return self
+
+
+class OverlapOut(BaseModel):
+    """Two footprints overlapping: the deepest moment of one pair."""
+
+    robots: tuple[str, str]
+    time: float
+    gap_m: float
+
+
+class SimulationResponse(BaseModel):
+    """What the run did: clearance, overlaps, deadlocks, completion times, trajectories."""
+
+    collision_free: bool
+    min_clearance_m: float | None
+    overlaps: list[OverlapOut]
+    deadlocked: list[str]
+    completion: dict[str, float | None]
+    trajectories: list[TrajectoryOut]

@@ -36,6 +36,9 @@ __all__ = ["CoordinationGraph", "GeometrySettings", "build_graph"]
 # Intervals of one robot closer than this (metres) merge into one node: only exact
 # touching (shared piece ends, equal up to rounding) is meant.
 TOUCH_TOL = 1e-9
+# Work bound of the narrow phase: paths longer in total than MAX_PIECES x resolution are
+# cut coarser (conservative sections, same safety) instead of exhausting memory.
+MAX_PIECES = 2_000_000
 
 
 @dataclass(frozen=True)
@@ -45,10 +48,16 @@ class GeometrySettings:
     ``resolution``: longest piece of a path, metres; sections and following gaps are
     conservative by up to this much. ``margin``: extra clearance, metres, that every
     plan keeps between two footprints (it also absorbs floating-point rounding).
+    ``max_pairs``: most segment pairs within reach before the request is refused.
     """
 
     resolution: float = 0.25
     margin: float = 0.05
+    max_pairs: int = 5_000_000
+
+    def effective_resolution(self, total_length: float) -> float:
+        """``resolution``, coarsened so that all paths together make at most MAX_PIECES pieces."""
+        return max(self.resolution, total_length / MAX_PIECES)
 
 
 @dataclass(frozen=True, eq=False)
@@ -154,8 +163,10 @@ def build_graph(paths: Sequence[RobotPath], settings: GeometrySettings) -> Coord
     Raises:
         ProblemError: fixed paths leave no collision-free order (robots parked in
             each other's way), naming the robots.
+        TooComplex: the paths interfere in more places than the work bound allows.
     """
-    boxes = interference_boxes(paths, settings.resolution, settings.margin)
+    resolution = settings.effective_resolution(sum(p.length for p in paths))
+    boxes = interference_boxes(paths, resolution, settings.margin, settings.max_pairs)
     node_robot, node_span, box_node_i, box_node_j = _merge_nodes(boxes)
     key = box_node_i * max(node_robot.size, 1) + box_node_j  # (B,)
     order = np.argsort(key, kind="stable")

@@ -28,11 +28,17 @@ import shapely
 
 from service.geometry.paths import RobotPath
 
-__all__ = ["CO_DIRECTIONAL_DEG", "Boxes", "Segments", "interference_boxes"]
+__all__ = ["CO_DIRECTIONAL_DEG", "Boxes", "Segments", "TooComplex", "interference_boxes"]
 
 # Two segments are co-directional when their headings differ by less than this (degrees):
 # robots then drive the shared section the same way and one may follow the other.
 CO_DIRECTIONAL_DEG = 30.0
+# Segments queried per STRtree call, so a runaway candidate count is caught early.
+QUERY_CHUNK = 4096
+
+
+class TooComplex(ValueError):
+    """The paths interfere in more places than the work bound allows (the API answers 413)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -86,6 +92,31 @@ class Boxes:
         return Boxes(*(getattr(self, f)[index] for f in Boxes.__dataclass_fields__))
 
 
+def _candidates(
+    tree: shapely.STRtree, grown: np.ndarray, robot: np.ndarray, max_pairs: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Segment pairs (a, b) of robots robot[a] < robot[b] whose grown boxes overlap.
+
+    Raises:
+        TooComplex: more than ``max_pairs`` of them (checked chunk by chunk, so
+            memory stays bounded however pathological the input).
+    """
+    parts_a, parts_b, total = [], [], 0
+    for lo in range(0, grown.size, QUERY_CHUNK):
+        q, t = tree.query(grown[lo : lo + QUERY_CHUNK])
+        q = q + lo
+        keep = robot[q] < robot[t]  # each robot pair once, never a robot with itself
+        parts_a.append(q[keep])
+        parts_b.append(t[keep])
+        total += int(keep.sum())
+        if total > max_pairs:
+            raise TooComplex(
+                f"paths come close in more than {max_pairs} segment pairs "
+                "(max_interference_pairs): split the request or simplify the paths"
+            )
+    return np.concatenate(parts_a), np.concatenate(parts_b)
+
+
 @numba.njit(cache=True, nogil=True)
 def _line_capsule(
     b0: np.ndarray, v: np.ndarray, a0: np.ndarray, a1: np.ndarray, reach: float
@@ -131,14 +162,24 @@ def _narrow_phase(
     p1: np.ndarray,  # (G, 2) float
     reach: np.ndarray,  # (C,) float, r_i + r_j + margin
     resolution: float,
-) -> tuple[np.ndarray, np.ndarray]:  # (B,) candidate index, (B, 4) x0 x1 y0 y1
+    max_boxes: int,
+) -> tuple[np.ndarray, np.ndarray, bool]:  # (B,) candidate, (B, 4) x0 x1 y0 y1, complete
     out_pair = []
     out_box = []
     for c in range(pair_a.size):
         a, b = pair_a[c], pair_b[c]
+        u = (p1[a] - p0[a]) / length[a]
         v = (p1[b] - p0[b]) / length[b]
+        # Only the stretch of A within reach of the whole of B is cut into pieces.
+        near_lo, near_hi = _line_capsule(p0[a], u, p0[b], p1[b], reach[c])
+        near_lo, near_hi = max(near_lo, 0.0), min(near_hi, length[a])
+        if not near_lo < near_hi:
+            continue
         n_pieces = max(1, int(np.ceil(length[a] / resolution)))
-        for k in range(n_pieces):
+        step = length[a] / n_pieces
+        first = min(int(near_lo / step), n_pieces - 1)
+        last = min(int(np.ceil(near_hi / step)), n_pieces)
+        for k in range(first, last):
             f0, f1 = k / n_pieces, (k + 1) / n_pieces
             q0 = p0[a] + f0 * (p1[a] - p0[a])
             q1 = p1[a] if k == n_pieces - 1 else p0[a] + f1 * (p1[a] - p0[a])
@@ -148,14 +189,23 @@ def _narrow_phase(
                 x1 = s0[a] + length[a] if k == n_pieces - 1 else s0[a] + f1 * length[a]
                 out_pair.append(c)
                 out_box.append((s0[a] + f0 * length[a], x1, s0[b] + lo, s0[b] + hi))
+                if len(out_box) > max_boxes:
+                    return np.zeros(0, dtype=np.int64), np.zeros((0, 4)), False
     boxes = np.empty((len(out_box), 4))
     for k in range(len(out_box)):
         boxes[k, 0], boxes[k, 1], boxes[k, 2], boxes[k, 3] = out_box[k]
-    return np.array(out_pair, dtype=np.int64), boxes
+    return np.array(out_pair, dtype=np.int64), boxes, True
 
 
-def interference_boxes(paths: Sequence[RobotPath], resolution: float, margin: float) -> Boxes:
-    """Every box where footprints of two robots come within ``margin`` of touching."""
+def interference_boxes(
+    paths: Sequence[RobotPath], resolution: float, margin: float, max_pairs: int
+) -> Boxes:
+    """Every box where footprints of two robots come within ``margin`` of touching.
+
+    Raises:
+        TooComplex: more than ``max_pairs`` segment pairs lie within reach, or more
+            than ``max_pairs`` boxes result (each box is ~100 bytes of work memory).
+    """
     segs = Segments.of(paths)
     radius = np.array([p.radius for p in paths])  # (R,)
     lo = np.minimum(segs.p0, segs.p1)  # (G, 2) bounding boxes
@@ -165,13 +215,16 @@ def interference_boxes(paths: Sequence[RobotPath], resolution: float, margin: fl
     # (a bulk ``dwithin`` query measured 20-50x slower); the narrow phase is exact.
     grow = 2.0 * float(radius.max()) + margin
     grown = shapely.box(lo[:, 0] - grow, lo[:, 1] - grow, hi[:, 0] + grow, hi[:, 1] + grow)
-    a, b = tree.query(grown)
-    keep = segs.robot[a] < segs.robot[b]  # each robot pair once, never a robot with itself
-    a, b = a[keep], b[keep]
+    a, b = _candidates(tree, grown, segs.robot, max_pairs)
     reach = radius[segs.robot[a]] + radius[segs.robot[b]] + margin  # (C,)
-    cand, box = _narrow_phase(
-        a, b, segs.s0, segs.length, segs.p0, segs.p1, reach, float(resolution)
+    cand, box, complete = _narrow_phase(
+        a, b, segs.s0, segs.length, segs.p0, segs.p1, reach, float(resolution), max_pairs
     )
+    if not complete:
+        raise TooComplex(
+            f"paths interfere in more than {max_pairs} places (max_interference_pairs): "
+            "split the request or simplify the paths"
+        )
     a, b = a[cand], b[cand]
     cos = np.einsum("kd,kd->k", segs.heading[a], segs.heading[b])
     return Boxes(

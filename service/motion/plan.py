@@ -19,12 +19,10 @@ import numpy as np
 
 from service.core.path_schemas import (
     CoordinationGraphResponse,
-    DependencyOut,
     MotionChecksOut,
     PathsRequest,
     PathsScheduleResponse,
     TrajectoryOut,
-    WaitPointOut,
 )
 from service.core.schemas import (
     AssignmentOut,
@@ -41,6 +39,7 @@ from service.motion.dependencies import Decision, dependency_plan
 from service.motion.trajectories import departure_times, realized_costs, trajectories
 from service.simulation.clearance import Clearance, Trajectory, check_clearance
 from service.simulation.executor import DependencyPlan, Run, execute
+from service.simulation.simulate import plan_to_wire
 from service.solvers.dispatch import DispatchPolicy, InvalidAnswerError, dispatch
 
 __all__ = ["MOTION_SHARE", "coordination_graph", "plan_paths"]
@@ -196,7 +195,7 @@ def _render(
             )
             for path, tr in zip(paths, executed.trajectories, strict=True)
         ],
-        dependencies=_dependencies(paths, executed.plan),
+        dependencies=plan_to_wire(paths, executed.plan),
     )
 
 
@@ -241,24 +240,3 @@ def _solver_info(
 
 def _decision_types(answer: ScheduleResponse) -> np.ndarray:
     return np.array([out.type == "following" for out in answer.assignment], dtype=bool)
-
-
-def _dependencies(paths: tuple[RobotPath, ...], plan: DependencyPlan) -> list[DependencyOut]:
-    """Per robot, its wait points in path order with whom it waits for."""
-    out = []
-    for r, path in enumerate(paths):
-        mine = np.flatnonzero(plan.waiter == r)
-        waits = []
-        for s in np.unique(plan.wait_s[mine]).tolist():
-            at = mine[plan.wait_s[mine] == s]
-            after: dict[int, float] = {}
-            for c in at.tolist():
-                w = int(plan.waitee[c])
-                after[w] = max(after.get(w, 0.0), float(plan.until_s[c]))
-            waits.append(
-                WaitPointOut(
-                    s=s, after=[{"robot": paths[w].id, "s": u} for w, u in sorted(after.items())]
-                )
-            )
-        out.append(DependencyOut(robot=path.id, waits=waits))
-    return out
