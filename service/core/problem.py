@@ -131,7 +131,7 @@ class Problem:
         """The fixed directions: conflicts (F,) int, their first (F,) and second (F,) nodes."""
         return forced_arcs(self.conf_a, self.conf_b, self.forced)
 
-    @property
+    @cached_property
     def has_forced(self) -> bool:
         """Whether any conflict's direction is fixed (solvers skip all extra work if not)."""
         return bool(self.forced.any())

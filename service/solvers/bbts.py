@@ -4,7 +4,8 @@ Conflicts are decided in time order (earliest pair enter first), each trying
 the FCFS direction before the other and following-type before exclusive; a
 value is skipped when it would close a cycle or overfill a density clique
 (:class:`OrientationGraph`), so every leaf is a valid assignment and the
-search never dead-ends. Leaves are evaluated in batches as they come. This is
+search never dead-ends; a conflict with a fixed direction only branches on its
+type. Leaves are evaluated in batches as they come. This is
 the published "BBTS" baseline: its first leaf is FCFS-like and the next ones
 differ only in the last few decisions (1,000 leaves span about log4(1000) ~ 5
 conflicts), which is why it falls off as problems grow.

@@ -4,7 +4,9 @@ Each conflict is won by the node that is expected to arrive first (node enter
 time; equal times by node index), which is a strict total order agreeing with
 every path, so the result is acyclic. Following-type is granted wherever every
 clique's budget allows, earliest conflicts (by pair enter time) first. Both go
-through the shared decoder, so density limits hold by construction.
+through the shared decoder, so density limits hold by construction, and so do
+fixed directions: the decoder lets a fixed first side pass first and moves the
+other robot's arrival order behind it (:meth:`Decoder.repair`).
 """
 
 from __future__ import annotations
