@@ -23,7 +23,7 @@ from service.api.errors import (
 )
 from service.api.metrics import Metrics
 from service.api.middleware import RequestMetricsMiddleware
-from service.api.routes import health, metrics, schedules
+from service.api.routes import coordination_graphs, health, metrics, schedules, simulations
 from service.api.runtime import Runtime, warm_up
 
 __all__ = ["app", "create_app", "lifespan"]
@@ -53,7 +53,7 @@ def create_app() -> FastAPI:
         lifespan=lifespan,
     )
     app.state.metrics = Metrics()
-    for module in (schedules, health, metrics):
+    for module in (schedules, coordination_graphs, simulations, health, metrics):
         app.include_router(module.router)
     app.add_exception_handler(ApiError, handle_api_error)
     app.add_exception_handler(RequestValidationError, handle_validation_error)

@@ -57,6 +57,15 @@ class Settings(BaseSettings):
     # their product should not exceed the machine's cores.
     exact_workers: int = Field(default=1, ge=1)
     solve_concurrency: int = Field(default=2, ge=1)
+    # Paths form (docs/paths.md): pieces of at most this many metres (sections and following
+    # gaps are conservative by up to this much) and this much clearance kept between
+    # footprints beyond their radii; caps on path points (413 above them) and on the
+    # interference work (segment pairs within reach, boxes) of one request.
+    geometry_resolution_m: float = Field(default=0.25, ge=0.01, le=100.0)
+    geometry_margin_m: float = Field(default=0.05, gt=0.0, le=10.0)
+    max_path_points: int = Field(default=10_000, ge=2)
+    max_total_path_points: int = Field(default=500_000, ge=2)
+    max_interference_pairs: int = Field(default=5_000_000, ge=1)
 
     @field_validator("log_level", mode="before")
     @classmethod

@@ -43,6 +43,8 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 Detail = str | list[dict[str, Any]]
+# Tags of the two body forms of POST /v1/schedules (service.api.routes.schedules).
+FORM_TAGS = ("graph", "paths")
 
 
 class ApiError(Exception):
@@ -70,8 +72,21 @@ class InvalidRequest(ApiError):
             msg = err["msg"]
             if err["type"] == "json_invalid" and "error" in err.get("ctx", {}):
                 msg = f"{msg}: {err['ctx']['error']}"
-            items.append({"loc": list(err["loc"]), "msg": msg, "type": err["type"]})
+            items.append({"loc": _without_form_tag(err["loc"]), "msg": msg, "type": err["type"]})
         return cls(items)
+
+
+def _without_form_tag(loc: tuple[str | int, ...]) -> list[str | int]:
+    """``loc`` without the body-form tag (``paths``/``graph``) pydantic puts after ``body``.
+
+    ``POST /v1/schedules`` takes two forms of body; the tag says which one was read,
+    not where the field is, so ``["body", "paths", "robots", 0]`` becomes
+    ``["body", "robots", 0]``, as the contract documents locations.
+    """
+    parts = list(loc)
+    if len(parts) > 2 and parts[0] == "body" and parts[1] in FORM_TAGS:
+        del parts[1]
+    return parts
 
 
 class InvalidProblem(ApiError):

@@ -1,21 +1,35 @@
-"""``POST /v1/schedules``: solve a coordination problem."""
+"""``POST /v1/schedules``: solve a coordination problem, given as a graph or as robot paths."""
 
 from __future__ import annotations
 
+from functools import partial
+from typing import Annotated
+
 from anyio import to_thread
 from fastapi import APIRouter
+from pydantic import Discriminator, Tag
 
 from service.api.body_limit import BodyLimitRoute
 from service.api.deps import MetricsDep, RuntimeDep, SettingsDep
 from service.api.errors import InvalidProblem, TooLarge
+from service.api.paths import check_path_caps, geometry_settings, run_paths_work
+from service.core.path_schemas import PathsRequest, PathsScheduleResponse, request_form
 from service.core.problem import ProblemError
 from service.core.schemas import ScheduleRequest, ScheduleResponse
+from service.motion.plan import plan_paths
 from service.settings import Settings
 from service.solvers.dispatch import dispatch
 
 __all__ = ["router"]
 
 router = APIRouter(prefix="/v1", tags=["schedules"], route_class=BodyLimitRoute)
+
+# The two forms of the body: robots with nodes (graph form) or with paths (paths form),
+# told apart by the first robot; a 422 names the field at fault within the chosen form.
+ScheduleBody = Annotated[
+    Annotated[ScheduleRequest, Tag("graph")] | Annotated[PathsRequest, Tag("paths")],
+    Discriminator(request_form),
+]
 
 ERROR_RESPONSES = {
     413: {"description": "The body, or its robots, nodes or conflicts, exceed a cap."},
@@ -25,24 +39,40 @@ ERROR_RESPONSES = {
 
 @router.post(
     "/schedules",
-    response_model=ScheduleResponse,
+    response_model=ScheduleResponse | PathsScheduleResponse,
     response_model_by_alias=True,
     responses=ERROR_RESPONSES,
 )
 async def create_schedule(
-    body: ScheduleRequest, settings: SettingsDep, runtime: RuntimeDep, metrics: MetricsDep
-) -> ScheduleResponse:
+    body: ScheduleBody, settings: SettingsDep, runtime: RuntimeDep, metrics: MetricsDep
+) -> ScheduleResponse | PathsScheduleResponse:
     """Schedule the conflicts of ``body``: who passes first, and how, at least cost.
 
     The answer always passes the constraint checker (``checks``). Solving runs in a
     worker thread, at most ``solve_concurrency`` at once, so the service stays responsive.
+    A paths-form body is answered with the derived graph and trajectories that the
+    service has executed and checked for clearance (docs/paths.md).
     """
+    if isinstance(body, PathsRequest):
+        return await schedule_paths(body, settings, runtime, metrics)
     check_caps(body, settings)
     metrics.observe_problem(len(body.robots), len(body.conflicts))
     try:
         response = await to_thread.run_sync(dispatch, body, runtime.policy, limiter=runtime.limiter)
     except ProblemError as exc:
         raise InvalidProblem.from_problem_error(exc) from exc
+    metrics.observe_solve(response)
+    return response
+
+
+async def schedule_paths(
+    body: PathsRequest, settings: Settings, runtime: RuntimeDep, metrics: MetricsDep
+) -> PathsScheduleResponse:
+    """The paths form: derive the graph, solve it, execute and check the trajectories."""
+    check_path_caps(body.robots, settings)
+    work = partial(plan_paths, body, runtime.policy, geometry_settings(settings))
+    response = await run_paths_work(work, runtime.limiter)
+    metrics.observe_problem(len(body.robots), len(response.assignment))
     metrics.observe_solve(response)
     return response
 
