@@ -1,9 +1,10 @@
 """Tabu search over single-conflict moves, started from FCFS.
 
-A move reverses one conflict's direction or flips its type; only moves that
-keep the assignment valid are considered (:class:`OrientationGraph` checks
-that reversing closes no cycle and that turning following-type fits every
-clique's budget), so every visited assignment is valid. Each iteration
+A move reverses one conflict's direction (never a fixed one) or flips its
+type; only moves that keep the assignment valid are considered
+(:class:`OrientationGraph` checks that reversing closes no cycle and that
+turning following-type fits every clique's budget), so every visited
+assignment is valid. Each iteration
 draws a candidate list of ``moves`` moves, evaluates its feasible ones in one
 batched call and takes the best admissible one, even if it is worse than the
 current assignment (that is what lets tabu search leave local optima). The
@@ -59,17 +60,20 @@ def _neighbours(current: Assignments, moves: np.ndarray) -> Assignments:
 
 
 def _candidates(
-    rng: np.random.Generator, binding: np.ndarray, n_moves: int, size: int
+    rng: np.random.Generator, binding: np.ndarray, movable: np.ndarray, size: int
 ) -> np.ndarray:
     """The candidate list: both moves of binding conflicts first, random moves to fill it.
 
-    Shapes: binding (B,) conflict indices -> (min(size, n_moves),) distinct moves.
+    Only ``movable`` moves are drawn (reversing a fixed direction is not), so fixed
+    conflicts do not crowd the list with moves that can never be taken.
+    Shapes: binding (B,) conflict indices, movable (2M,) bool -> (<= size,) distinct moves.
     """
-    n_conf = n_moves // 2
+    n_conf = movable.size // 2
     focused = np.concatenate([binding, binding + n_conf])  # (2B,)
+    focused = focused[movable[focused]]
     if focused.size >= size:
         return rng.choice(focused, size=size, replace=False)
-    rest = np.setdiff1d(np.arange(n_moves), focused, assume_unique=True)
+    rest = np.setdiff1d(np.flatnonzero(movable), focused, assume_unique=True)
     fill = rng.choice(rest, size=min(size - focused.size, rest.size), replace=False)
     return np.concatenate([focused, fill])
 
@@ -89,6 +93,7 @@ def tabu_search(
     graph = ctx.orientation
     evaluate = ctx.evaluator.evaluate
     n_moves = 2 * ctx.problem.n_conflicts
+    movable = np.concatenate([ctx.problem.forced == 0, np.ones(n_moves // 2, dtype=bool)])  # (2M,)
     current = best = start
     evaluation = evaluate(start)
     best_cost = float(evaluation.costs[ctx.objective][0])
@@ -100,7 +105,7 @@ def tabu_search(
             break
         it += 1
         stale += 1
-        moves = _candidates(rng, binding, n_moves, cfg.moves)
+        moves = _candidates(rng, binding, movable, cfg.moves)
         moves = moves[graph.feasible(current.a_first[0], current.following[0], moves)]
         if moves.size == 0:
             continue
