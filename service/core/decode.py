@@ -16,9 +16,9 @@ before directions are read (:meth:`Decoder.repair`): a longest-path pass over
 the DAG of path order and fixed arcs raises the second node of every fixed
 conflict just above its first and shifts the rest of that robot's path by the
 same amount (the robot waits), so ranks stay non-decreasing along every path
-and the fixed first node always comes first. Ranks that already agree with
-every fixed direction are left as they are; without fixed directions nothing
-runs at all.
+and the fixed first node always comes first. Ranks that already put every
+fixed first node strictly below its second are left as they are; without fixed
+directions nothing runs at all.
 
 The converse also holds (tested): every acyclic assignment comes from the bids
 ``bids_from_ranks(topological positions)`` and every density-feasible type
@@ -80,7 +80,7 @@ def _push_forced(
     prev: np.ndarray,  # (V,) int, previous node on the path or -1
     in_start: np.ndarray,  # (V+1,) int, fixed arcs into each node (CSR)
     in_first: np.ndarray,  # (F,) int, their first nodes
-) -> np.ndarray:  # (S, V) float, least ranks >= the input honouring every fixed arc
+) -> np.ndarray:  # (S, V) float, ranks >= the input, honouring every fixed arc
     """Longest-path repair: each node keeps its path predecessor's shift, and a fixed
     second node goes just above (next float up) its first node."""
     out = np.empty_like(ranks)
@@ -145,7 +145,7 @@ class Decoder:
 
         Samples whose repaired ranks are not finite (chain sums that overflowed) are
         repaired from their ordinal positions in the (rank, node index) order instead,
-        which decode to the same directions but leave room above every rank.
+        which order the nodes as the ranks do but leave room above every rank.
         """
         if not self.problem.has_forced:
             return np.atleast_2d(ranks)
