@@ -3,9 +3,9 @@
 Lanes are axis-aligned centre lines (one-way or both ways); the graph's nodes
 are lane ends, lane crossings, and the points where a bay's spur joins a lane.
 Routes are shortest paths (networkx Dijkstra) on a graph of states
-(node, heading): one-way lanes are driven forward only, a turn costs
-``TURN_PENALTY`` extra so routes with few turns win, U-turns on a lane are not
-allowed, and bays are route ends, never passed through.
+(node, heading at crossings): one-way lanes are driven forward only, a turn
+costs ``TURN_PENALTY`` extra so routes with few turns win, U-turns at
+crossings are not allowed, and bays are route ends, never passed through.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ __all__ = ["AisleGraph", "Bay", "Lane", "Point"]
 Point = tuple[float, float]
 # Headings of axis-aligned moves: east, north, west, south; (h + 2) % 4 reverses h.
 EAST, NORTH, WEST, SOUTH = range(4)
-FREE = -1  # state of a robot that has not moved yet: any first heading, no turn cost
+FREE = -1  # state without a heading: a start, or a lane point where no lane turn is possible
 END = 4  # state of a robot that has arrived, whatever its heading
 # Metres of driving one turn is worth: among routes within a few metres of the
 # shortest, the one with fewest turns wins (each turn means slowing down).
@@ -84,15 +84,18 @@ def crossing(a: Lane, b: Lane) -> Point | None:
     return p if vertical.covers(p) and horizontal.covers(p) else None
 
 
-def lane_graph(lanes: Sequence[Lane], bays: Sequence[Bay]) -> nx.DiGraph:
-    """Directed graph of lane segments and bay spurs; edge ``weight`` is length in metres."""
+def lane_graph(lanes: Sequence[Lane], bays: Sequence[Bay]) -> tuple[nx.DiGraph, set[Point]]:
+    """Directed graph of lane segments and bay spurs (edge ``weight`` in metres), and
+    the lane crossings (the only nodes where a route can turn from lane to lane)."""
     points: list[set[Point]] = [{lane.start, lane.end} for lane in lanes]
+    crossings: set[Point] = set()
     for i, a in enumerate(lanes):
         for j in range(i + 1, len(lanes)):
             p = crossing(a, lanes[j])
             if p is not None:
                 points[i].add(p)
                 points[j].add(p)
+                crossings.add(p)
     by_line: dict[tuple[bool, float], list[int]] = defaultdict(list)
     for i, lane in enumerate(lanes):
         by_line[lane.vertical, lane.start[0] if lane.vertical else lane.start[1]].append(i)
@@ -113,24 +116,36 @@ def lane_graph(lanes: Sequence[Lane], bays: Sequence[Bay]) -> nx.DiGraph:
         for p in bay.access:
             graph.add_edge(bay.point, p, weight=math.dist(bay.point, p))
             graph.add_edge(p, bay.point, weight=math.dist(bay.point, p))
-    return graph
+    return graph, crossings
 
 
-def turn_graph(graph: nx.DiGraph, ends: set[Point]) -> nx.DiGraph:
-    """Graph of states (node, arrival heading) with turn costs; ``ends`` are never passed."""
+def turn_graph(graph: nx.DiGraph, crossings: set[Point], ends: set[Point]) -> nx.DiGraph:
+    """Graph of route states with turn costs.
+
+    A crossing has one state per arrival heading (a turn there costs
+    ``TURN_PENALTY``, a U-turn is not allowed); any other lane point has one
+    state ``FREE`` (its only turns are into and out of bay spurs, which every
+    route makes alike). An end (bay) is left from ``(bay, FREE)`` and reached
+    at ``(bay, END)``, so no route passes through it.
+    """
+
+    def arrival(u: Point, v: Point) -> State:
+        if v in ends:
+            return (v, END)
+        return (v, heading(u, v) if v in crossings else FREE)
+
     states = nx.DiGraph()
-    incoming = {v: {heading(u, v) for u in graph.predecessors(v)} for v in graph}
+    arrivals = {v: {heading(u, v) for u in graph.predecessors(v)} for v in crossings}
     for u, v, length in graph.edges(data="weight"):
         h = heading(u, v)
-        states.add_edge((u, FREE), (v, h), weight=length)
-        if u in ends:
+        if u not in crossings:
+            states.add_edge((u, FREE), arrival(u, v), weight=length)
             continue
-        for h_in in incoming[u]:
+        for h_in in arrivals[u]:
             if h_in != (h + 2) % 4:
-                states.add_edge((u, h_in), (v, h), weight=length + TURN_PENALTY * (h_in != h))
-    for v, arrivals in incoming.items():
-        for h_in in arrivals:
-            states.add_edge((v, h_in), (v, END), weight=0.0)
+                states.add_edge(
+                    (u, h_in), arrival(u, v), weight=length + TURN_PENALTY * (h_in != h)
+                )
     return states
 
 
@@ -138,9 +153,8 @@ class AisleGraph:
     """Routes between bays (and lane points) of one warehouse layout."""
 
     def __init__(self, lanes: Sequence[Lane], bays: Sequence[Bay]) -> None:
-        self.graph = lane_graph(lanes, bays)
-        self.states = turn_graph(self.graph, {bay.point for bay in bays})
-        self.reversed = self.states.reverse(copy=True)
+        self.graph, crossings = lane_graph(lanes, bays)
+        self.states = turn_graph(self.graph, crossings, {bay.point for bay in bays})
 
     def routes(self, trips: Sequence[tuple[Point, Point]]) -> list[np.ndarray]:
         """(N_k, 2) route of each (start, goal) trip.
@@ -158,7 +172,9 @@ class AisleGraph:
                 _, chain = nx.bidirectional_dijkstra(self.states, (start, FREE), (goal, END))
                 routes[members[0]] = self._points(chain)
                 continue
-            towards, _ = nx.dijkstra_predecessor_and_distance(self.reversed, (goal, END))
+            towards, _ = nx.dijkstra_predecessor_and_distance(
+                self.states.reverse(copy=False), (goal, END)
+            )
             for k in members:
                 chain = [(trips[k][0], FREE)]
                 while chain[-1] != (goal, END):
