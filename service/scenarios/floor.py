@@ -28,9 +28,12 @@ from service.scenarios.world import World, ring_of
 
 __all__ = ["FloorParams", "floor"]
 
-# Default floor size: 16 m^2 per robot (a busy but workable AMR floor), never
+# Default floor size: 16 m^2 of free floor per robot (a busy but workable AMR floor), never
 # under 20 m a side, 3:2 landscape.
 AREA_PER_ROBOT = 16.0
+# AREA_PER_ROBOT is free floor for robots of this radius: larger robots and
+# more clutter get proportionally more floor.
+REFERENCE_RADIUS = 0.4
 MIN_SIDE = 20.0
 ASPECT = 1.5
 WALL_THICKNESS = 0.3  # metres, a partition wall
@@ -48,7 +51,7 @@ GAP_KEEP_CLEAR = 1.5
 class FloorParams:
     """Layout of an obstacle floor; ``None`` sizes are derived from the fleet."""
 
-    width: float | None = None  # metres; None: AREA_PER_ROBOT per robot
+    width: float | None = None  # metres; None: AREA_PER_ROBOT of free floor per robot
     height: float | None = None
     density: float = 0.1  # share of the floor area drawn as clutter obstacles
     disk_fraction: float = 0.5  # share of clutter that is disks (the rest boxes)
@@ -71,7 +74,8 @@ class FloorParams:
 
     def resolved(self, n_robots: int, max_radius: float) -> FloorParams:
         """These parameters with the floor size and gap width filled in."""
-        area = max(n_robots * AREA_PER_ROBOT, MIN_SIDE * MIN_SIDE * ASPECT)
+        crowding = (max_radius / REFERENCE_RADIUS) ** 2 / (1.0 - self.density)
+        area = max(n_robots * AREA_PER_ROBOT, MIN_SIDE * MIN_SIDE * ASPECT) * max(1.0, crowding)
         free_band = max_radius + CLEARANCE_MARGIN + self.resolution / SQRT2
         return dataclasses.replace(
             self,
