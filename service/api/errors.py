@@ -84,7 +84,7 @@ def _without_form_tag(loc: tuple[str | int, ...]) -> list[str | int]:
     ``["body", "robots", 0]``, as the contract documents locations.
     """
     parts = list(loc)
-    if len(parts) > 2 and parts[0] == "body" and parts[1] in FORM_TAGS:
+    if len(parts) >= 2 and parts[0] == "body" and parts[1] in FORM_TAGS:
         del parts[1]
     return parts
 
