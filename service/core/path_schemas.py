@@ -71,6 +71,11 @@ class PathRobotIn(BaseModel):
     start_time: Time | None = None
     times: list[Time] | None = None
 
+    @property
+    def begin(self) -> float:
+        """Planned start time: ``times[0]``, else ``start_time`` (default 0)."""
+        return self.times[0] if self.times else self.start_time or 0.0
+
     @field_validator("path")
     @classmethod
     def _distinct_consecutive(cls, path: list[Point]) -> list[Point]:
