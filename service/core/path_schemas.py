@@ -32,6 +32,7 @@ __all__ = [
     "PathRobotIn",
     "PathsRequest",
     "TrajectoryOut",
+    "TimingsOut",
     "MotionChecksOut",
     "Dependency",
     "WaitPoint",
@@ -197,6 +198,14 @@ class Dependency(BaseModel):
     waits: list[WaitPoint]
 
 
+class TimingsOut(BaseModel):
+    """Where the time of a paths-form answer went, seconds."""
+
+    graph_s: float = Field(description="Paths to coordination graph (geometry).")
+    solve_s: float = Field(description="The graph's solve, checks and evaluation (dispatch).")
+    motion_s: float = Field(description="Dependency plan, execution and clearance check.")
+
+
 class PathsScheduleResponse(BaseModel):
     """Body of a successful paths-form ``POST /v1/schedules``.
 
@@ -215,6 +224,7 @@ class PathsScheduleResponse(BaseModel):
     node_spans: dict[str, tuple[float, float]]
     trajectories: list[TrajectoryOut]
     dependencies: list[Dependency]
+    timings: TimingsOut
 
 
 class CoordinationGraphResponse(BaseModel):

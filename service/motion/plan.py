@@ -22,6 +22,7 @@ from service.core.path_schemas import (
     MotionChecksOut,
     PathsRequest,
     PathsScheduleResponse,
+    TimingsOut,
     TrajectoryOut,
 )
 from service.core.schemas import (
@@ -96,14 +97,21 @@ def plan_paths(
     start = time.perf_counter()
     graph = derive(request, geometry)
     graph_request = graph.to_request(request)
+    graph_done = time.perf_counter()
     limit = request.options.time_limit_s or policy.default_time_limit_s
     answer: ScheduleResponse | None = None
     if graph_request is not None:
-        left = limit * (1.0 - MOTION_SHARE) - (time.perf_counter() - start)
+        left = limit * (1.0 - MOTION_SHARE) - (graph_done - start)
         options = graph_request.options.model_copy(update={"time_limit_s": max(MIN_SOLVE_S, left)})
         answer = dispatch(graph_request.model_copy(update={"options": options}), policy)
+    solve_done = time.perf_counter()
     executed = _execute_safely(graph, _decision(graph, answer))
-    return _render(request, graph, graph_request, answer, executed, time.perf_counter() - start)
+    timings = TimingsOut(
+        graph_s=graph_done - start,
+        solve_s=solve_done - graph_done,
+        motion_s=time.perf_counter() - solve_done,
+    )
+    return _render(request, graph, graph_request, answer, executed, timings)
 
 
 def _decision(graph: CoordinationGraph, answer: ScheduleResponse | None) -> Decision:
@@ -146,7 +154,7 @@ def _render(
     graph_request: ScheduleRequest | None,
     answer: ScheduleResponse | None,
     executed: _Executed,
-    runtime_s: float,
+    timings: TimingsOut,
 ) -> PathsScheduleResponse:
     """The wire answer: the graph answer's fields, re-described by the executed motion."""
     paths, run = graph.paths, executed.run
@@ -178,7 +186,7 @@ def _render(
         costs=CostsOut(**costs),
         assignment=_assignment(graph, executed.decision),
         schedule=schedule,
-        solver=_solver_info(answer, executed, runtime_s),
+        solver=_solver_info(answer, executed, timings.solve_s),
         checks=MotionChecksOut(
             acyclic=True if answer is None else answer.checks.acyclic,
             density=True if answer is None else answer.checks.density,
@@ -196,6 +204,7 @@ def _render(
             for path, tr in zip(paths, executed.trajectories, strict=True)
         ],
         dependencies=plan_to_wire(paths, executed.plan),
+        timings=timings,
     )
 
 
@@ -225,7 +234,8 @@ def _assignment(graph: CoordinationGraph, decision: Decision) -> list[Assignment
 def _solver_info(
     answer: ScheduleResponse | None, executed: _Executed, runtime_s: float
 ) -> SolverInfoOut:
-    """The graph solver's info, noting when the plan had to be executed all-exclusive."""
+    """The graph solver's info (its runtime: the whole dispatch), noting when the plan had
+    to be executed all-exclusive."""
     if answer is None:
         return SolverInfoOut(
             name="none", optimal=True, runtime_s=runtime_s, detail="no two robots interfere"
