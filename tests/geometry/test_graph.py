@@ -1,0 +1,189 @@
+"""The coordination graph of paths: nodes, conflicts, densities, fixed orders, the wire graph."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+
+from service.core.path_schemas import PathsRequest
+from service.core.problem import ProblemError, problem_from_request
+from service.core.schemas import ScheduleRequest
+from service.geometry.graph import CoordinationGraph, GeometrySettings, build_graph
+from service.motion.plan import coordination_graph
+from tests.motion.worlds import fleets, paths_of, request, robot
+
+SETTINGS = GeometrySettings()
+
+
+def _graph(robots: list[dict[str, Any]]) -> tuple[PathsRequest, CoordinationGraph]:
+    """The request of ``robots`` and its graph."""
+    req = request(robots)
+    return req, build_graph(paths_of(req), SETTINGS)
+
+
+def assert_graph_sound(req: PathsRequest, graph: CoordinationGraph) -> ScheduleRequest | None:
+    """Structural invariants of a derived graph; returns its (accepted) wire form."""
+    robot_of, span = graph.node_robot, graph.node_span
+    assert np.all(np.diff(robot_of) >= 0), "nodes grouped by robot"
+    assert np.all(span[:, 0] < span[:, 1])
+    same = robot_of[1:] == robot_of[:-1]
+    assert np.all(span[1:, 0][same] > span[:-1, 1][same]), "strictly separated, in path order"
+    lengths = np.array([p.length for p in graph.paths])
+    assert np.all(span[:, 0] >= 0) and np.all(span[:, 1] <= lengths[robot_of] + 1e-9)
+    pairs = [tuple(p) for p in graph.conf_node.tolist()]
+    assert len(set(pairs)) == len(pairs), "one conflict per node pair"
+    assert np.all(robot_of[graph.conf_node[:, 0]] < robot_of[graph.conf_node[:, 1]])
+    # Every box lies inside its conflict's union box, which lies inside both nodes.
+    assert graph.box_start[0] == 0 and graph.box_start[-1] == graph.boxes.size
+    assert np.all(np.diff(graph.box_start) > 0)
+    for m in range(graph.n_conflicts):
+        a, b = graph.conf_node[m]
+        x0, x1, y0, y1 = graph.conf_span[m]
+        lo, hi = graph.box_start[m], graph.box_start[m + 1]
+        boxes = graph.boxes
+        assert np.all(boxes.i[lo:hi] == robot_of[a]) and np.all(boxes.j[lo:hi] == robot_of[b])
+        assert boxes.x0[lo:hi].min() == x0 and boxes.x1[lo:hi].max() == x1
+        assert boxes.y0[lo:hi].min() == y0 and boxes.y1[lo:hi].max() == y1
+        assert span[a, 0] <= x0 < x1 <= span[a, 1]
+        assert span[b, 0] <= y0 < y1 <= span[b, 1]
+        expected = 1 if x0 <= 0 else (-1 if y0 <= 0 else 0)
+        assert graph.forced[m] == expected, "a robot parked at its start passes first"
+    assert set(np.unique(graph.node_density).tolist()) <= {1, 2}
+    wire = graph.to_request(req)
+    if wire is None:
+        assert robot_of.size == 0
+        return None
+    problem_from_request(wire)  # the contract's cross-field rules accept it
+    ScheduleRequest.model_validate(wire.model_dump(mode="json"))  # and so does the wire
+    assert [r.id for r in wire.robots] == [graph.paths[r].id for r in graph.robots_in_graph()]
+    assert sorted(graph.isolated_robots() + [r.id for r in wire.robots]) == sorted(
+        p.id for p in graph.paths
+    )
+    return wire
+
+
+@settings(max_examples=40, deadline=None, derandomize=True)
+@given(robots=fleets())
+def test_random_fleets_give_sound_graphs_or_refuse_by_name(robots: list[dict[str, Any]]) -> None:
+    req = request(robots)
+    try:
+        graph = build_graph(paths_of(req), SETTINGS)
+    except ProblemError as err:
+        assert "re-plan" in str(err)
+        assert sum(f"'{r['id']}'" in str(err) for r in robots) >= 2
+        return
+    assert_graph_sound(req, graph)
+
+
+def test_crossing_robots_form_one_exclusive_conflict() -> None:
+    req, graph = _graph(
+        [robot("h", [[0, 5], [10, 5]], start_time=1.0), robot("v", [[5, 0], [5, 10]], speed=2.0)]
+    )
+    wire = assert_graph_sound(req, graph)
+    assert wire is not None
+    assert graph.n_conflicts == 1 and graph.node_robot.tolist() == [0, 1]
+    assert graph.node_density.tolist() == [1, 1]
+    assert graph.forced.tolist() == [0]
+    # Both sections are centred on the crossing and span at least the two radii + margin.
+    (x0, x1), (y0, y1) = graph.node_span.tolist()
+    assert x0 < 5 - 0.85 + 1e-9 and x1 > 5 + 0.85 - 1e-9 and (x0 + x1) / 2 == pytest.approx(5)
+    assert y0 < 5 - 0.85 + 1e-9 and y1 > 5 + 0.85 - 1e-9 and (y0 + y1) / 2 == pytest.approx(5)
+    # Times are the planned times there: h from t=1 at 1 m/s, v at 2 m/s from 0.
+    node_h, node_v = wire.robots[0].nodes[0], wire.robots[1].nodes[0]
+    assert (node_h.enter, node_h.exit) == pytest.approx((1 + x0, 1 + x1))
+    assert (node_v.enter, node_v.exit) == pytest.approx((y0 / 2, y1 / 2))
+    assert wire.robots[0].goal_time == 11.0 and wire.robots[1].goal_time == 5.0
+    assert graph.node_ids() == ["h/0", "v/0"]
+    assert graph.node_spans() == {"h/0": (x0, x1), "v/0": (y0, y1)}
+
+
+# Lane b joins lane a 0.6 m beside it on a shallow (11 degree) approach: co-directional.
+LANE_A = [[-1.0, 0.0], [10.0, 0.0]]
+LANE_B = [[-20.0, 5.0], [2.0, 0.6], [10.0, 0.6]]
+
+
+def test_density_two_only_for_co_directional_sections() -> None:
+    """Two robots side by side the same way may follow; head-on or crossed, they may not."""
+    req, same = _graph([robot("a", LANE_A), robot("b", LANE_B)])
+    assert_graph_sound(req, same)
+    assert same.node_density.tolist() == [2, 2] and same.forced.tolist() == [0]
+    _, opposite = _graph([robot("a", LANE_A), robot("b", LANE_B[::-1])])
+    assert opposite.node_density.tolist() == [1, 1]
+    req, mixed = _graph([robot("a", LANE_A), robot("b", LANE_B), robot("c", [[5, -5], [5, 5]])])
+    assert_graph_sound(req, mixed)
+    assert mixed.node_density.tolist() == [1, 1, 1]  # the crossing touches both lanes' nodes
+
+
+def test_parked_robot_passes_first() -> None:
+    """b starts on a's route (a drives through b's start point): b is fixed first."""
+    req, graph = _graph(
+        [robot("a", [[0, 0], [10, 0]]), robot("b", [[5, 0.3], [5, 8]], start_time=3.0)]
+    )
+    wire = assert_graph_sound(req, graph)
+    assert wire is not None and graph.n_conflicts == 1
+    assert graph.forced.tolist() == [-1]
+    assert wire.conflicts[0].first == "b"
+    assert graph.conf_span[0, 2] == 0.0
+
+
+@pytest.mark.parametrize("swap", [False, True])
+def test_robots_parked_in_each_others_way_are_refused_by_name(swap: bool) -> None:
+    """Facing each other in a one-lane aisle: neither can pass the other."""
+    robots = [robot("east-1", [[0, 0], [10, 0]]), robot("west-2", [[10, 0], [0, 0]])]
+    if swap:
+        robots.reverse()
+    with pytest.raises(ProblemError) as err:
+        _graph(robots)
+    assert "'east-1'" in str(err.value) and "'west-2'" in str(err.value)
+
+
+def test_a_circle_of_parked_robots_is_refused_naming_all() -> None:
+    """Three robots each parked on the next one's way out of a small triangle."""
+    corners = np.array([[0.0, 0.0], [1.6, 0.0], [0.8, 1.4]])
+    nxt = np.roll(corners, -1, axis=0)
+    robots = [robot(f"r{k}", [corners[k], nxt[k], 8 * nxt[k] - 4 * corners[k]]) for k in range(3)]
+    with pytest.raises(ProblemError) as err:
+        _graph(robots)
+    message = str(err.value)
+    assert all(f"'r{k}'" in message for k in range(3)), message
+
+
+def test_out_and_back_path_crossed_twice() -> None:
+    """An aisle driven out and back, crossed near its middle: two nodes on the aisle robot,
+    one on the crossing robot, and two conflicts."""
+    req, graph = _graph(
+        [robot("aisle", [[0, 0], [10, 0], [0, 0.05]]), robot("cross", [[4, -4], [4, 4]])]
+    )
+    assert_graph_sound(req, graph)
+    aisle = graph.node_span[graph.node_robot == 0]
+    assert aisle.shape == (2, 2)
+    assert aisle[0, 1] < 10 < aisle[1, 0]
+    assert graph.n_conflicts == 2
+    assert (graph.node_robot == 1).sum() == 1
+
+
+def test_isolated_robots_are_listed_and_get_no_node() -> None:
+    req, graph = _graph(
+        [
+            robot("lonely", [[50, 50], [60, 50]]),
+            robot("h", [[0, 5], [10, 5]]),
+            robot("v", [[5, 0], [5, 10]]),
+        ]
+    )
+    wire = assert_graph_sound(req, graph)
+    assert graph.isolated_robots() == ["lonely"]
+    assert 0 not in graph.node_robot.tolist()
+    assert wire is not None and [r.id for r in wire.robots] == ["h", "v"]
+    response = coordination_graph(req, SETTINGS)
+    assert response.isolated_robots == ["lonely"]
+    assert set(response.node_spans) == {"h/0", "v/0"}
+
+
+def test_no_interference_gives_no_graph() -> None:
+    req, graph = _graph([robot("a", [[0, 0], [1, 0]]), robot("b", [[0, 5], [1, 5]])])
+    assert graph.to_request(req) is None
+    assert graph.isolated_robots() == ["a", "b"]
+    assert graph.n_conflicts == 0
