@@ -30,7 +30,7 @@ __all__ = ["FloorParams", "floor"]
 
 # Default floor size: 16 m^2 of free floor per robot (a busy but workable AMR floor), never
 # under 20 m a side, 3:2 landscape.
-AREA_PER_ROBOT = 16.0
+AREA_PER_ROBOT = 10.0
 # AREA_PER_ROBOT is free floor for robots of this radius: larger robots and
 # more clutter get proportionally more floor.
 REFERENCE_RADIUS = 0.4
@@ -98,7 +98,8 @@ def floor(n_robots: int, seed: int, density: float = 0.1, **params: Any) -> Worl
     bounds = (0.0, 0.0, float(layout.width), float(layout.height))
     walls, keep_clear = walls_with_gaps(layout, rng)
     shapes = walls + clutter(layout, keep_clear, rng)
-    planner = GridPlanner(bounds, shapes, layout.resolution)
+    reach = fleet.max_radius + ENDPOINT_CLEARANCE + layout.resolution  # above every threshold
+    planner = GridPlanner(bounds, shapes, layout.resolution, reach)
     starts, goals = draw_trips(planner, layout, n_robots, fleet.max_radius, rng)
     paths = [planner.plan(s, g, r) for s, g, r in zip(starts, goals, radii.tolist(), strict=True)]
     return World(

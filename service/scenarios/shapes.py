@@ -33,6 +33,11 @@ class Disk:
         """Distance from points to the disk, 0 inside. Shapes: x, y (...) -> (...)."""
         return np.maximum(np.hypot(x - self.cx, y - self.cy) - self.r, 0.0)
 
+    @property
+    def bbox(self) -> tuple[float, float, float, float]:
+        """xmin, ymin, xmax, ymax."""
+        return (self.cx - self.r, self.cy - self.r, self.cx + self.r, self.cy + self.r)
+
     def polygon(self) -> Polygon:
         """The inscribed polygon stored in the world."""
         return Point(self.cx, self.cy).buffer(self.r, quad_segs=DISK_QUAD_SEGS)
@@ -52,6 +57,11 @@ class Box:
         dx = np.maximum(np.maximum(self.xmin - x, x - self.xmax), 0.0)
         dy = np.maximum(np.maximum(self.ymin - y, y - self.ymax), 0.0)
         return np.hypot(dx, dy)
+
+    @property
+    def bbox(self) -> tuple[float, float, float, float]:
+        """xmin, ymin, xmax, ymax."""
+        return (self.xmin, self.ymin, self.xmax, self.ymax)
 
     def polygon(self) -> Polygon:
         """The box as a polygon."""
