@@ -19,7 +19,7 @@ from itertools import pairwise
 import networkx as nx
 import numpy as np
 
-__all__ = ["AisleGraph", "Bay", "Lane", "Point"]
+__all__ = ["AisleGraph", "Bay", "Lane", "Point", "key"]
 
 Point = tuple[float, float]
 # Headings of axis-aligned moves: east, north, west, south; (h + 2) % 4 reverses h.

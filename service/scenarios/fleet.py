@@ -16,7 +16,14 @@ import numpy as np
 
 from service.scenarios.world import ROUND_DIGITS
 
-__all__ = ["FleetParams", "clean_path", "make_robots", "sample_radii"]
+__all__ = [
+    "FleetParams",
+    "check_robot_count",
+    "clean_path",
+    "make_robots",
+    "piecewise_times",
+    "sample_radii",
+]
 
 # Interior points whose turn is below this cross product (m^2) lie on a straight
 # line: dropping them leaves the same path with fewer points.

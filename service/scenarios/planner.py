@@ -23,7 +23,14 @@ from shapely.geometry.base import BaseGeometry
 
 from service.scenarios.shapes import DISK_QUAD_SEGS, Shape
 
-__all__ = ["CLEARANCE_MARGIN", "GridPlanner", "NoPathError", "SearchGrid"]
+__all__ = [
+    "CLEARANCE_MARGIN",
+    "SQRT2",
+    "GridPlanner",
+    "NoPathError",
+    "SearchGrid",
+    "largest_component",
+]
 
 # Metres every planned segment keeps beyond the robot radius: absorbs the
 # rounding of coordinates (0.1 mm) and float error in the distance checks.

@@ -209,6 +209,8 @@ def draw_trips(
 ) -> list[tuple[Point, Point]]:
     """(start, goal) of each robot: storage -> station or station -> storage.
 
+    Robots beyond the number of station bays that drew station -> storage drive
+    storage -> station instead.
     Storage bays are distinct across robots and station starts too (robots waiting
     at their start never share a spot); robots bound for a station prefer a bay
     nobody starts at. A ``parked_in_lanes`` share starts on the lane in front of
@@ -216,10 +218,8 @@ def draw_trips(
     """
     if len(layout.storage) < n_robots:
         raise ValueError(f"{len(layout.storage)} storage bays for {n_robots} robots")
-    inbound = rng.random(n_robots) < p.to_station_fraction
-    outbound = np.flatnonzero(~inbound)[: len(layout.stations)]
-    inbound[:] = True
-    inbound[outbound] = False
+    to_station = rng.random(n_robots) < p.to_station_fraction
+    outbound = np.flatnonzero(~to_station)[: len(layout.stations)]  # one station bay each
     cells = rng.choice(len(layout.storage), size=n_robots, replace=False)
     station_starts = rng.choice(len(layout.stations), size=len(outbound), replace=False)
     taken = set(station_starts.tolist())
@@ -230,10 +230,10 @@ def draw_trips(
     outbound_station = dict(zip(outbound.tolist(), station_starts.tolist(), strict=True))
     for k in range(n_robots):
         cell = layout.storage[cells[k]]
-        if inbound[k]:
-            start_bay, goal = cell, layout.stations[goals[k]].point
-        else:
+        if k in outbound_station:
             start_bay, goal = layout.stations[outbound_station[k]], cell.point
+        else:
+            start_bay, goal = cell, layout.stations[goals[k]].point
         start = start_bay.access[0] if parked[k] else start_bay.point
         if start in starts_used:
             start = start_bay.point
