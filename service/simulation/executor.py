@@ -220,7 +220,9 @@ def _expand(
         clocks.append(records[-1][1])
     wall, clock = np.asarray(walls), np.asarray(clocks)
     order = np.lexsort((clock, wall))
-    wall, clock = wall[order], clock[order]
+    # A clock computed at a rate edge (c0 + progress) can round one ulp below the one
+    # before it; a robot never drives back, so the clock is made non-decreasing.
+    wall, clock = wall[order], np.maximum.accumulate(clock[order])
     keep = np.ones(wall.size, dtype=bool)
     keep[1:] = (np.diff(wall) > 0) | (np.diff(clock) > 0)
     return wall[keep], clock[keep]
