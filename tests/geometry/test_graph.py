@@ -1,4 +1,9 @@
-"""The coordination graph of paths: nodes, conflicts, densities, fixed orders, the wire graph."""
+"""The coordination graph of paths: nodes, conflicts, densities, fixed orders, the wire graph.
+
+Densities are checked by what they allow under the contract (the reference's
+density groups): a conflict may be following-type on its own only where the two
+robots drive a section the same way, never where they cross or meet head-on.
+"""
 
 from __future__ import annotations
 
@@ -12,8 +17,10 @@ from service.core.path_schemas import PathsRequest
 from service.core.problem import ProblemError, problem_from_request
 from service.core.schemas import ScheduleRequest
 from service.geometry.graph import CoordinationGraph, GeometrySettings, build_graph
+from service.geometry.paths import RobotPath
 from service.motion.plan import coordination_graph
 from tests.motion.worlds import fleets, paths_of, request, robot
+from tests.reference import density_groups, density_ok, reference_problem
 
 SETTINGS = GeometrySettings()
 
@@ -51,11 +58,16 @@ def assert_graph_sound(req: PathsRequest, graph: CoordinationGraph) -> ScheduleR
         assert span[b, 0] <= y0 < y1 <= span[b, 1]
         expected = 1 if x0 <= 0 else (-1 if y0 <= 0 else 0)
         assert graph.forced[m] == expected, "a robot parked at its start passes first"
-    assert set(np.unique(graph.node_density).tolist()) <= {1, 2}
+    assert np.all(graph.node_density >= 1)
     wire = graph.to_request(req)
     if wire is None:
         assert robot_of.size == 0
         return None
+    for m, allowed in enumerate(following_alone_allowed(wire)):
+        cos = _box_cosines(graph, m)
+        if allowed:  # crossings and head-on sections are exclusive
+            assert np.any(cos > np.cos(np.radians(30))), f"crossing conflict {m} may follow"
+            assert not np.any(cos < -np.cos(np.radians(30))), f"head-on conflict {m} may follow"
     problem_from_request(wire)  # the contract's cross-field rules accept it
     ScheduleRequest.model_validate(wire.model_dump(mode="json"))  # and so does the wire
     assert [r.id for r in wire.robots] == [graph.paths[r].id for r in graph.robots_in_graph()]
@@ -63,6 +75,32 @@ def assert_graph_sound(req: PathsRequest, graph: CoordinationGraph) -> ScheduleR
         p.id for p in graph.paths
     )
     return wire
+
+
+def following_alone_allowed(wire: ScheduleRequest) -> list[bool]:
+    """Per conflict: do the contract's density rules let it alone be following-type?"""
+    ref = reference_problem(wire.model_dump(mode="json", exclude_none=True))
+    groups = density_groups(ref)
+    return [
+        density_ok(groups, [k == m for k in range(ref.n_conflicts)]) for m in range(ref.n_conflicts)
+    ]
+
+
+def _heading(path: RobotPath, s: np.ndarray) -> np.ndarray:
+    """(K, 2) unit direction of travel of the segments holding arc lengths ``s`` (K,)."""
+    k = np.clip(np.searchsorted(path.arc, s, side="right") - 1, 0, path.arc.size - 2)
+    d = path.points[k + 1] - path.points[k]
+    return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+def _box_cosines(graph: CoordinationGraph, m: int) -> np.ndarray:
+    """Cosine of the angle between the two robots' headings in each box of conflict m."""
+    lo, hi = graph.box_start[m], graph.box_start[m + 1]
+    b = graph.boxes
+    i, j = graph.node_robot[graph.conf_node[m]].tolist()
+    ui = _heading(graph.paths[i], (b.x0[lo:hi] + b.x1[lo:hi]) / 2)
+    uj = _heading(graph.paths[j], (b.y0[lo:hi] + b.y1[lo:hi]) / 2)
+    return np.einsum("kd,kd->k", ui, uj)
 
 
 @settings(max_examples=40, deadline=None, derandomize=True)
@@ -105,16 +143,23 @@ LANE_A = [[-1.0, 0.0], [10.0, 0.0]]
 LANE_B = [[-20.0, 5.0], [2.0, 0.6], [10.0, 0.6]]
 
 
-def test_density_two_only_for_co_directional_sections() -> None:
+def test_following_only_for_co_directional_sections() -> None:
     """Two robots side by side the same way may follow; head-on or crossed, they may not."""
     req, same = _graph([robot("a", LANE_A), robot("b", LANE_B)])
-    assert_graph_sound(req, same)
-    assert same.node_density.tolist() == [2, 2] and same.forced.tolist() == [0]
-    _, opposite = _graph([robot("a", LANE_A), robot("b", LANE_B[::-1])])
+    wire = assert_graph_sound(req, same)
+    assert wire is not None and following_alone_allowed(wire) == [True]
+    assert np.all(same.node_density >= 2) and same.forced.tolist() == [0]
+    req, opposite = _graph([robot("a", LANE_A), robot("b", LANE_B[::-1])])
+    wire = assert_graph_sound(req, opposite)
+    assert wire is not None and following_alone_allowed(wire) == [False]
     assert opposite.node_density.tolist() == [1, 1]
     req, mixed = _graph([robot("a", LANE_A), robot("b", LANE_B), robot("c", [[5, -5], [5, 5]])])
-    assert_graph_sound(req, mixed)
-    assert mixed.node_density.tolist() == [1, 1, 1]  # the crossing touches both lanes' nodes
+    wire = assert_graph_sound(req, mixed)
+    assert wire is not None and mixed.n_conflicts == 3
+    crossing = [m for m, c in enumerate(wire.conflicts) if c.b.startswith("c/")]
+    assert len(crossing) == 2
+    allowed = following_alone_allowed(wire)
+    assert not any(allowed[m] for m in crossing)
 
 
 def test_parked_robot_passes_first() -> None:
