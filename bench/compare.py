@@ -38,7 +38,18 @@ import numpy as np
 from tqdm import tqdm
 
 from bench.problems import BenchProblem, small_set, stitched_set
-from bench.report import delay_ratio, format_table, machine_info, write_csv, write_json
+from bench.report import (
+    JsonCache,
+    delay_ratio,
+    fmt,
+    format_table,
+    jsonable,
+    machine_info,
+    nanmean,
+    write_csv,
+    write_json,
+)
+from bench.report import config_from_args as _override
 from service.core.assignment import Assignments
 from service.core.check import check
 from service.core.evaluate import Evaluator
@@ -138,18 +149,13 @@ class ReferenceCache:
     """Long CP-SAT solves by problem seed, objective and limit, kept in one JSON file."""
 
     def __init__(self, directory: Path, limit_s: float) -> None:
-        self.path = directory / f"compare-ref-{limit_s:g}s.json"
+        self.cache = JsonCache(directory / f"compare-ref-{limit_s:g}s.json")
         self.limit_s = limit_s
-        self.data: dict[str, Any] = json.loads(self.path.read_text()) if self.path.exists() else {}
 
     def get(self, case: Case) -> None:
         """Fill the case's reference from the cache, or solve it and store it."""
         key = f"{case.bp.seed}-{case.bp.robots}-{case.objective}"
-        if key not in self.data:
-            self.data[key] = _reference_solve(case, self.limit_s)
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            self.path.write_text(json.dumps(self.data))
-        hit = self.data[key]
+        hit = self.cache.get(key, lambda: _reference_solve(case, self.limit_s))
         case.ref_cost, case.ref_optimal = hit["cost"], hit["optimal"]
         case.ref_trace = [tuple(p) for p in hit["trace"]]
 
@@ -295,14 +301,10 @@ def run(cfg: Config, progress: bool = True) -> dict[str, Any]:
         ]
     return {
         "machine": machine_info(),
-        "config": _jsonable(asdict(cfg)),
+        "config": jsonable(asdict(cfg)),
         "rows": rows,
         "ablation": ablation,
     }
-
-
-def _jsonable(d: dict[str, Any]) -> dict[str, Any]:
-    return {k: str(v) if isinstance(v, Path) else v for k, v in d.items()}
 
 
 def summarize(rows: Sequence[dict[str, Any]], by: Sequence[str]) -> list[dict[str, Any]]:
@@ -322,27 +324,18 @@ def summarize(rows: Sequence[dict[str, Any]], by: Sequence[str]) -> list[dict[st
                 "answered": len(answered),
                 "ratio_mean": float(np.mean(ratio)),
                 "ratio_p10": float(np.percentile(ratio, 10)),
-                "delay_ratio_mean": _nanmean([m["delay_ratio"] for m in answered]),
-                "gap_mean": _nanmean([m["gap"] for m in answered]),
+                "delay_ratio_mean": nanmean([m["delay_ratio"] for m in answered]),
+                "gap_mean": nanmean([m["gap"] for m in answered]),
                 "runtime_s_mean": float(np.mean([m["runtime_s"] for m in members])),
                 "reached_ref": float(np.mean([m["reached_ref"] for m in members])),
-                "time_to_ref_s_mean": _nanmean(
+                "time_to_ref_s_mean": nanmean(
                     [np.nan if m["time_to_ref_s"] is None else m["time_to_ref_s"] for m in members]
                 ),
                 "cpsat_reached": sum(t is not None for t in cpsat),
-                "cpsat_time_s_mean": _nanmean([np.nan if t is None else t for t in cpsat]),
+                "cpsat_time_s_mean": nanmean([np.nan if t is None else t for t in cpsat]),
             }
         )
     return out
-
-
-def _nanmean(values: Sequence[float]) -> float:
-    arr = np.array(values, dtype=float)
-    return float(np.nanmean(arr)) if np.isfinite(arr).any() else float("nan")
-
-
-def _fmt(x: float, digits: int = 3) -> str:
-    return "-" if x != x else f"{x:.{digits}f}"
 
 
 def comparison_table(summary: Sequence[dict[str, Any]]) -> str:
@@ -367,7 +360,7 @@ def comparison_table(summary: Sequence[dict[str, Any]]) -> str:
         cpsat = (
             "never"
             if s["cpsat_reached"] == 0
-            else _fmt(s["cpsat_time_s_mean"], 2)
+            else fmt(s["cpsat_time_s_mean"], 2)
             + ("+" if s["cpsat_reached"] < s["answered"] else "")
         )
         cells = [
@@ -376,13 +369,13 @@ def comparison_table(summary: Sequence[dict[str, Any]]) -> str:
             s["robots"],
             s["method"],
             s["answered"],
-            _fmt(s["ratio_mean"], 4),
-            _fmt(s["ratio_p10"], 4),
-            _fmt(s["delay_ratio_mean"]),
-            _fmt(s["gap_mean"], 4),
-            _fmt(s["runtime_s_mean"]),
+            fmt(s["ratio_mean"], 4),
+            fmt(s["ratio_p10"], 4),
+            fmt(s["delay_ratio_mean"]),
+            fmt(s["gap_mean"], 4),
+            fmt(s["runtime_s_mean"]),
             f"{100 * s['reached_ref']:.0f} %",
-            _fmt(s["time_to_ref_s_mean"], 2),
+            fmt(s["time_to_ref_s_mean"], 2),
             cpsat,
         ]
         lines.append("| " + " | ".join(str(c) for c in cells) + " |")
@@ -408,10 +401,10 @@ def ablation_table(summary: Sequence[dict[str, Any]]) -> str:
                 s["density"],
                 s["robots"],
                 s["samples"],
-                _fmt(s["ratio_mean"], 4),
-                _fmt(s["ratio_p10"], 4),
-                _fmt(s["delay_ratio_mean"]),
-                _fmt(s["runtime_s_mean"]),
+                fmt(s["ratio_mean"], 4),
+                fmt(s["ratio_p10"], 4),
+                fmt(s["delay_ratio_mean"]),
+                fmt(s["runtime_s_mean"]),
             ]
             for s in summary
         ],
@@ -549,13 +542,7 @@ def _parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
 
 def config_from_args(args: argparse.Namespace) -> Config:
     """The quick or full defaults, overridden by every flag given."""
-    base = QUICK if args.quick else Config()
-    given = {
-        k: tuple(v) if isinstance(v, list) else v
-        for k, v in vars(args).items()
-        if k not in ("quick", "summarize") and v is not None
-    }
-    return replace(base, **given)
+    return _override(args, Config(), QUICK)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -2,29 +2,38 @@
 
 from __future__ import annotations
 
+import argparse
 import csv
 import json
 import os
 import platform
 import subprocess
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import replace
 from datetime import UTC, datetime
 from importlib import metadata
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
 __all__ = [
     "PERCENTILES",
+    "JsonCache",
+    "config_from_args",
     "delay_ratio",
+    "fmt",
     "format_table",
+    "jsonable",
     "machine_info",
+    "nanmean",
     "plot_solve_times",
     "summarize_solves",
     "write_csv",
     "write_json",
 ]
+
+C = TypeVar("C")  # a benchmark's frozen Config dataclass
 
 # Percentiles reported for solve times. With few problems per group p95 interpolates
 # between the largest times (numpy's default, "linear"), so read it with the group size.
@@ -41,6 +50,54 @@ def delay_ratio(opt: float, cost: float, free: float) -> float:
     if opt < free - tol:  # sync_completion is not monotone: zero delay need not be a bound
         return float("nan")
     return (opt - free) / (cost - free)
+
+
+def nanmean(values: Sequence[float]) -> float:
+    """Mean of the finite values (NaN stands for "none"); NaN if there is none."""
+    arr = np.array(values, dtype=float)
+    return float(np.nanmean(arr)) if np.isfinite(arr).any() else float("nan")
+
+
+def fmt(x: float, digits: int = 3) -> str:
+    """``x`` with ``digits`` decimals, "-" for NaN."""
+    return "-" if x != x else f"{x:.{digits}f}"
+
+
+def jsonable(d: dict[str, Any]) -> dict[str, Any]:
+    """A config's fields as JSON-ready values (paths as strings)."""
+    return {k: str(v) if isinstance(v, Path) else v for k, v in d.items()}
+
+
+def config_from_args(
+    args: argparse.Namespace, full: C, quick: C, skip: Sequence[str] = ("quick", "summarize")
+) -> C:
+    """The quick (``args.quick``) or full defaults, overridden by every flag given.
+
+    Flags not among the config's fields go in ``skip``; lists become tuples.
+    """
+    base = quick if args.quick else full
+    given = {
+        k: tuple(v) if isinstance(v, list) else v
+        for k, v in vars(args).items()
+        if k not in skip and v is not None
+    }
+    return replace(base, **given)  # type: ignore[type-var]
+
+
+class JsonCache:
+    """Expensive results by key, kept in one JSON file rewritten after every new entry."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.data: dict[str, Any] = json.loads(path.read_text()) if path.exists() else {}
+
+    def get(self, key: str, compute: Callable[[], Any]) -> Any:
+        """The stored value of ``key``, or ``compute()``'s, stored first."""
+        if key not in self.data:
+            self.data[key] = compute()
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self.path.write_text(json.dumps(self.data))
+        return self.data[key]
 
 
 def summarize_solves(runs: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
