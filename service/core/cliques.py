@@ -5,10 +5,18 @@ maximal clique K (networkx), rho_K = min density of its nodes and at most
 h_K = rho_K (rho_K + 1) / 2 - 1 of the conflicts inside K may be following-type;
 each explicit ``density_limits`` entry adds the same kind of clique with
 rho = its ``max_robots``. Only cliques with at least one conflict matter.
+
+Maximal cliques can be exponentially many (a complete multipartite conflict
+graph of k robots with n nodes each has n^k), so the enumeration stops with
+:class:`TooManyCliques` once the cliques hold more conflicts than the budget
+set by :func:`clique_budget`; the service sets it per request, CLIs leave it unbounded.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass
 
 import networkx as nx
@@ -16,7 +24,35 @@ import numpy as np
 
 from service.core.problem import Problem
 
-__all__ = ["Cliques", "budget_for", "find_cliques"]
+__all__ = ["Cliques", "TooManyCliques", "budget_for", "clique_budget", "find_cliques"]
+
+# Clique-conflict incidences (the CSR's E) one enumeration may produce; None: unbounded.
+_MAX_INCIDENCES: ContextVar[int | None] = ContextVar("max_clique_incidences", default=None)
+
+
+class TooManyCliques(ValueError):
+    """The conflict graph's maximal cliques hold more conflicts than the budget allows."""
+
+    def __init__(self, budget: int) -> None:
+        super().__init__(
+            "conflict graph too dense: its maximal cliques hold more than "
+            f"{budget} conflicts in all (max_clique_incidences)"
+        )
+        self.budget = budget
+
+
+@contextmanager
+def clique_budget(max_incidences: int | None) -> Iterator[None]:
+    """Bound :func:`find_cliques` in this context (thread or task) to ``max_incidences``.
+
+    A context variable rather than a parameter: the enumeration runs deep inside
+    whichever solver first needs the cliques, and requests run concurrently.
+    """
+    token = _MAX_INCIDENCES.set(max_incidences)
+    try:
+        yield
+    finally:
+        _MAX_INCIDENCES.reset(token)
 
 
 def budget_for(rho: int) -> int:
@@ -68,29 +104,61 @@ class Cliques:
 
 
 def find_cliques(problem: Problem) -> Cliques:
-    """Maximal cliques of the conflict graph plus explicit limits, with budgets."""
-    pair_index = {
-        (a, b): k
-        for k, (a, b) in enumerate(
-            zip(problem.conf_a.tolist(), problem.conf_b.tolist(), strict=True)
-        )
-    }
-    pair_index.update({(b, a): k for (a, b), k in list(pair_index.items())})
+    """Maximal cliques of the conflict graph plus explicit limits, with budgets.
+
+    Raises:
+        TooManyCliques: the cliques exceed the budget of :func:`clique_budget`.
+    """
     graph = nx.Graph()
-    graph.add_edges_from(pair_index)
-    groups: list[tuple[list[int], int]] = []
+    graph.add_edges_from(zip(problem.conf_a.tolist(), problem.conf_b.tolist(), strict=True))
     density = problem.node_density
-    for members in nx.find_cliques(graph):
-        groups.append((members, budget_for(int(density[members].min()))))
-    for lim in problem.density_limits:
-        groups.append((lim.nodes.tolist(), budget_for(lim.max_robots)))
-    edges: list[list[int]] = [
-        [pair_index[(u, v)] for i, u in enumerate(m) for v in m[i + 1 :]] for m, _ in groups
-    ]
-    counts = np.array([len(e) for e in edges], dtype=np.int64)
+    groups = _bounded(nx.find_cliques(graph), _MAX_INCIDENCES.get())
+    budgets = [budget_for(int(density[m].min())) for m in groups]
+    groups += [lim.nodes.tolist() for lim in problem.density_limits]
+    budgets += [budget_for(lim.max_robots) for lim in problem.density_limits]
+    edge, start = _incidences(problem, groups)
     return Cliques(
-        budget=np.array([h for _, h in groups], dtype=np.int64),
-        edge=np.array([k for e in edges for k in sorted(e)], dtype=np.int64),
-        start=np.concatenate([[0], np.cumsum(counts)]).astype(np.int64),
+        budget=np.array(budgets, dtype=np.int64),
+        edge=edge,
+        start=start,
         n_conflicts=problem.n_conflicts,
     )
+
+
+def _bounded(cliques: Iterator[list[int]], max_incidences: int | None) -> list[list[int]]:
+    """Every clique of ``cliques``, stopping as soon as they hold more than ``max_incidences``."""
+    groups: list[list[int]] = []
+    incidences = 0
+    for members in cliques:
+        incidences += len(members) * (len(members) - 1) // 2
+        if max_incidences is not None and incidences > max_incidences:
+            raise TooManyCliques(max_incidences)
+        groups.append(members)
+    return groups
+
+
+def _incidences(problem: Problem, groups: list[list[int]]) -> tuple[np.ndarray, np.ndarray]:
+    """The conflicts inside each clique of ``groups`` (node lists), in CSR layout.
+
+    Vectorized per clique size: every node pair of a clique is a conflict, looked up
+    by its key ``min * V + max`` among the sorted conflict keys.
+
+    Shapes: -> edge (E,) int sorted within each clique, start (Q+1,) int.
+    """
+    n_nodes = problem.node_density.size
+    lo = np.minimum(problem.conf_a, problem.conf_b).astype(np.int64)
+    hi = np.maximum(problem.conf_a, problem.conf_b).astype(np.int64)
+    order = np.argsort(lo * n_nodes + hi)
+    sorted_keys = (lo * n_nodes + hi)[order]
+    sizes = np.array([len(m) for m in groups], dtype=np.int64)
+    start = np.concatenate([[0], np.cumsum(sizes * (sizes - 1) // 2)]).astype(np.int64)
+    edge = np.empty(start[-1], dtype=np.int64)
+    for size in np.unique(sizes).tolist():
+        which = np.flatnonzero(sizes == size)
+        members = np.array([groups[q] for q in which], dtype=np.int64)  # (Q_s, size)
+        i, j = np.triu_indices(size, 1)
+        u, v = members[:, i], members[:, j]
+        keys = np.minimum(u, v) * n_nodes + np.maximum(u, v)  # (Q_s, size (size - 1) / 2)
+        inside = np.sort(order[np.searchsorted(sorted_keys, keys)], axis=1)
+        edge[start[which][:, None] + np.arange(i.size)] = inside
+    return edge, start

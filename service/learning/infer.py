@@ -7,28 +7,80 @@ through the heads. Deterministic for a seed (a private torch.Generator).
 
 from __future__ import annotations
 
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+
 import numpy as np
 import torch
 
 from service.core.assignment import Assignments
 from service.core.decode import Decoder, decode_candidates
 from service.core.evaluate import Evaluator
+from service.core.problem import Problem
 from service.core.schemas import Objective
 from service.learning.features import GraphTensors
 from service.learning.model import GnnVae
 
-__all__ = ["BID_NOISE", "best_of", "propose"]
+__all__ = [
+    "BID_NOISE",
+    "CHUNK_BYTES",
+    "Sampled",
+    "best_of",
+    "chunk_rows",
+    "propose",
+    "propose_chunks",
+    "sample_best",
+]
+
+# Working memory of one chunk of samples, the bound that keeps a request's peak memory
+# independent of its sample count. Per sample, the heads hold about three float32
+# (V + M, hidden) activations, and the decoder lays the bids out per robot, padded to
+# the longest path (two float64 arrays of robots x longest-path cells: the padding and
+# its running sum). So a fleet with one long robot costs far more than its node count:
+# 1,000 robots with one of 10,000 nodes take ~180 MB a sample, and 40 samples in one
+# batch took the server to 7.2 GB (issue 14).
+CHUNK_BYTES = 256 * 1024 * 1024
+HEAD_BYTES_PER_CELL = 12  # per node or conflict and hidden unit
+DECODE_BYTES_PER_CELL = 16  # per robot and position along the longest path
 
 # Largest log-std of the multiplicative bid perturbation (see :func:`propose`);
 # picked on validation problems among 0.3, 0.5 and 1.0.
 BID_NOISE = 0.5
 
 
-@torch.inference_mode()
+@dataclass(frozen=True)
+class Sampled:
+    """The cheapest decoded sample (a batch of one), its cost, and how many were decoded."""
+
+    assignment: Assignments
+    cost: float
+    samples: int
+
+
+def chunk_rows(problem: Problem, hidden: int) -> int:
+    """Samples handled at once: as many as fit :data:`CHUNK_BYTES`, at least one."""
+    longest = int(np.diff(problem.robot_start).max())
+    heads = HEAD_BYTES_PER_CELL * hidden * (problem.node_density.size + problem.n_conflicts)
+    decode = DECODE_BYTES_PER_CELL * problem.n_robots * longest
+    return max(1, CHUNK_BYTES // (heads + decode))
+
+
 def propose(
     model: GnnVae, graph: GraphTensors, samples: int, seed: int
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Bids and following probabilities of ``samples`` draws.
+    """Bids and following probabilities of ``samples`` draws, in one batch.
+
+    Shapes: -> bids (S, V) float64 > 0, probabilities (S, M) float64.
+    """
+    return next(propose_chunks(model, graph, samples, seed, rows=samples))
+
+
+@torch.inference_mode()
+def propose_chunks(
+    model: GnnVae, graph: GraphTensors, samples: int, seed: int, rows: int
+) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """Bids and following probabilities of ``samples`` draws, ``rows`` draws at a time.
 
     The draws form a ladder: draw k scales its latent z ~ N(0, I) and a
     log-normal bid perturbation exp(sigma_k * eps) by k / (S - 1), so draw 0
@@ -36,16 +88,59 @@ def propose(
     ``BID_NOISE``). The perturbation is ours, not the paper's: the trained VAE
     uses its latent little (KL ~0.1 nats), and on held-out validation problems
     the ladder raised the best-of-100 ratio from 0.9885 to 0.9996.
+    The trunk runs once, the heads once per chunk of ``rows`` draws, only when the
+    chunk is asked for; the random draws do not depend on ``rows``.
 
-    Shapes: -> bids (S, V) float64 > 0, probabilities (S, M) float64.
+    Shapes: -> per chunk of n draws: bids (n, V) float64 > 0, probabilities (n, M) float64.
     """
     gen = torch.Generator().manual_seed(int(seed))
     ladder = torch.linspace(0.0, 1.0, samples)[:, None] if samples > 1 else torch.zeros(1, 1)
     z = torch.randn(samples, model.config.latent, generator=gen) * ladder  # (S, Z)
+    noise = torch.randn(samples, graph.x.shape[0], generator=gen) * (BID_NOISE * ladder)  # (S, V)
     h = model.embed(graph.x, graph.edge_index, graph.edge_attr)  # (V, H)
-    bids, logits = model.sample_heads(h, graph.conf.T.contiguous(), z)  # (S, V), (S, M)
-    noise = torch.randn(bids.shape, generator=gen) * (BID_NOISE * ladder)  # (S, V)
-    return (bids * noise.exp()).double().numpy(), torch.sigmoid(logits).double().numpy()
+    conf = graph.conf.T.contiguous()
+    for lo in range(0, samples, rows):
+        bids, logits = model.sample_heads(h, conf, z[lo : lo + rows])  # (n, V), (n, M)
+        bids = bids * noise[lo : lo + rows].exp()
+        yield bids.double().numpy(), torch.sigmoid(logits).double().numpy()
+
+
+def sample_best(
+    model: GnnVae,
+    graph: GraphTensors,
+    decoder: Decoder,
+    evaluator: Evaluator,
+    objective: Objective,
+    samples: int,
+    seed: int,
+    *,
+    deadline: float | None = None,
+) -> Sampled:
+    """The cheapest of ``samples`` decoded samples, in memory-bounded chunks.
+
+    Samples pass the heads, the decoder and the evaluator :func:`chunk_rows` at a
+    time, so the working memory stays near :data:`CHUNK_BYTES` whatever the sample
+    count; the answer is the one a single batch would give (ties go to the lower
+    row of the unchunked order: thresholded rows first, then filled ones, see
+    :func:`service.core.decode.decode_candidates`). Past ``deadline``
+    (``time.monotonic()``), no further chunk starts: the first always runs.
+    """
+    rows = chunk_rows(decoder.problem, model.config.hidden)
+    chunks = propose_chunks(model, graph, samples, seed, rows)
+    best: tuple[float, int, Assignments] | None = None
+    decoded = 0
+    for bids, probs in chunks:
+        candidates = decode_candidates(decoder, bids, probs, objective)
+        costs = evaluator.evaluate(candidates).costs[objective]  # (n,) or (2n,)
+        row = int(np.argmin(costs))
+        chunk = (float(costs[row]), _unchunked_row(row, decoded, len(bids), samples))
+        if best is None or chunk < best[:2]:
+            best = (*chunk, candidates.take(row))
+        decoded += len(bids)
+        if deadline is not None and time.monotonic() >= deadline:
+            break
+    assert best is not None  # samples >= 1: at least one chunk
+    return Sampled(best[2], best[0], decoded)
 
 
 def best_of(
@@ -57,9 +152,15 @@ def best_of(
     samples: int,
     seed: int,
 ) -> tuple[Assignments, float]:
-    """The cheapest decoded sample (a batch of one) and its cost."""
-    bids, probs = propose(model, graph, samples, seed)
-    candidates = decode_candidates(decoder, bids, probs, objective)
-    costs = evaluator.evaluate(candidates).costs[objective]  # (S,) or (2S,)
-    best = int(np.argmin(costs))
-    return candidates.take(best), float(costs[best])
+    """The cheapest of all ``samples`` decoded samples (a batch of one) and its cost."""
+    best = sample_best(model, graph, decoder, evaluator, objective, samples, seed)
+    return best.assignment, best.cost
+
+
+def _unchunked_row(row: int, lo: int, n: int, samples: int) -> int:
+    """Row ``row`` of the candidates of samples lo..lo+n-1, as a row of all samples' candidates.
+
+    Non-monotone objectives decode every sample twice (rows n.. of a chunk repeat
+    its samples); in the full batch those repeats start at row ``samples``.
+    """
+    return lo + row if row < n else samples + lo + row - n

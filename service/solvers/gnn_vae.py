@@ -8,8 +8,10 @@ degrades to the exact solver (then FCFS).
 
 from __future__ import annotations
 
+import time
+
 from service.learning.features import graph_tensors
-from service.learning.infer import best_of
+from service.learning.infer import sample_best
 from service.solvers.registry import SolveContext, SolverOutput, register
 
 __all__ = ["DEFAULT_SAMPLES", "gnn_vae"]
@@ -20,13 +22,30 @@ DEFAULT_SAMPLES = 100
 
 @register("gnn_vae")
 def gnn_vae(ctx: SolveContext) -> SolverOutput | None:
-    """Best of ``ctx.samples`` (default 100) decoded samples of the objective's model."""
+    """Best of ``ctx.samples`` (default 100) decoded samples of the objective's model.
+
+    Samples are decoded in memory-bounded chunks; once the time limit has passed no
+    further chunk starts, and the answer says how many samples it is the best of.
+    """
     stored = ctx.models.get(ctx.objective)
     if stored is None:
         return None
+    deadline = time.monotonic() + ctx.time_limit_s
     samples = ctx.samples or DEFAULT_SAMPLES
     graph = graph_tensors(ctx.problem, ctx.cliques)
-    assignment, _ = best_of(
-        stored.model, graph, ctx.decoder, ctx.evaluator, ctx.objective, samples, ctx.seed
+    best = sample_best(
+        stored.model,
+        graph,
+        ctx.decoder,
+        ctx.evaluator,
+        ctx.objective,
+        samples,
+        ctx.seed,
+        deadline=deadline,
     )
-    return SolverOutput(assignment, optimal=False, model=stored.name, samples=samples)
+    detail = None
+    if best.samples < samples:
+        detail = f"time limit reached after {best.samples} of {samples} samples"
+    return SolverOutput(
+        best.assignment, optimal=False, model=stored.name, samples=best.samples, detail=detail
+    )
