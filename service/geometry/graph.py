@@ -183,7 +183,7 @@ def build_graph(paths: Sequence[RobotPath], settings: GeometrySettings) -> Coord
         node_density=_densities(node_robot.size, box_node_i, box_node_j, boxes.co_directional),
         conf_node=conf_node,
         conf_span=conf_span,
-        forced=_parked_orders(conf_span),
+        forced=_parked_orders(paths, boxes, first, conf_span, settings.margin),
         boxes=boxes,
         box_start=box_start,
     )
@@ -259,15 +259,38 @@ def _densities(
     return np.where(crossing, 1, 2).astype(np.int64)
 
 
-def _parked_orders(conf_span: np.ndarray) -> np.ndarray:
-    """(M,) int8 fixed directions: a robot whose section starts at its first point goes first.
+def _parked_orders(
+    paths: Sequence[RobotPath],
+    boxes: Boxes,
+    first: np.ndarray,
+    conf_span: np.ndarray,
+    margin: float,
+) -> np.ndarray:
+    """(M,) int8 fixed directions: a robot whose first point lies in the section goes first.
 
-    Side a is fixed first when its section starts at arc length 0, side b likewise;
-    both at once is a contradiction that :func:`_check_fixed_orders` reports.
+    Side b (exact arc lengths) is parked when its section starts at arc length 0: its
+    first point is within reach of a's piece. Side a's arc lengths are pieces, so a
+    section starting at 0 only says that a's first *piece* comes within reach; a is
+    parked when its first point itself is within reach of b's stretch of such a box
+    (else standing at its start is clear of b, and waiting there is safe). Both at
+    once is a contradiction that :func:`_check_fixed_orders` reports.
     """
-    a_parked = conf_span[:, 0] <= 0.0
     b_parked = conf_span[:, 2] <= 0.0
+    near = np.zeros(boxes.size, dtype=bool)  # (B,) a's first point within reach in the box
+    for k in np.flatnonzero(boxes.x0 <= 0.0).tolist():
+        a, b = paths[int(boxes.i[k])], paths[int(boxes.j[k])]
+        p0, p1 = b.position_at(np.array([boxes.y0[k], boxes.y1[k]]))  # one segment of b
+        near[k] = _point_segment_distance(a.points[0], p0, p1) < a.radius + b.radius + margin
+    a_parked = np.logical_or.reduceat(near, first) if first.size else np.zeros(0, dtype=bool)
     return np.where(a_parked & b_parked, 2, a_parked.astype(np.int8) - b_parked).astype(np.int8)
+
+
+def _point_segment_distance(q: np.ndarray, p0: np.ndarray, p1: np.ndarray) -> float:
+    """Least distance from point q (2,) to the segment p0-p1 (2,) each."""
+    d = p1 - p0
+    denom = float(d @ d)
+    f = 0.0 if denom <= 0.0 else min(1.0, max(0.0, float((q - p0) @ d) / denom))
+    return float(np.linalg.norm(p0 + f * d - q))
 
 
 def _check_fixed_orders(graph: CoordinationGraph) -> None:

@@ -19,7 +19,7 @@ from service.core.schemas import ScheduleRequest
 from service.geometry.graph import CoordinationGraph, GeometrySettings, build_graph
 from service.geometry.paths import RobotPath
 from service.motion.plan import coordination_graph
-from tests.motion.worlds import fleets, paths_of, request, robot
+from tests.motion.worlds import distance_to_path, fleets, paths_of, request, robot
 from tests.reference import density_groups, density_ok, reference_problem
 
 SETTINGS = GeometrySettings()
@@ -56,8 +56,7 @@ def assert_graph_sound(req: PathsRequest, graph: CoordinationGraph) -> ScheduleR
         assert boxes.y0[lo:hi].min() == y0 and boxes.y1[lo:hi].max() == y1
         assert span[a, 0] <= x0 < x1 <= span[a, 1]
         assert span[b, 0] <= y0 < y1 <= span[b, 1]
-        expected = 1 if x0 <= 0 else (-1 if y0 <= 0 else 0)
-        assert graph.forced[m] == expected, "a robot parked at its start passes first"
+        assert graph.forced[m] == _expected_first(graph, m), "a parked robot passes first"
     assert np.all(graph.node_density >= 1)
     wire = graph.to_request(req)
     if wire is None:
@@ -75,6 +74,21 @@ def assert_graph_sound(req: PathsRequest, graph: CoordinationGraph) -> ScheduleR
         p.id for p in graph.paths
     )
     return wire
+
+
+def _expected_first(graph: CoordinationGraph, m: int) -> int:
+    """+1 / -1 when side a / b of conflict m is parked (its first point within reach of the
+    other's stretch of the section), 0 when neither (both is refused before)."""
+    i, j = graph.node_robot[graph.conf_node[m]].tolist()
+    a, b = graph.paths[i], graph.paths[j]
+    x0, x1, y0, y1 = graph.conf_span[m].tolist()
+    reach = a.radius + b.radius + SETTINGS.margin
+    a_parked = distance_to_path(a.points[0], b, y0, y1) < reach
+    b_parked = y0 <= 0.0
+    if b_parked:  # b's arc lengths are exact: its first point is within reach of a's section
+        assert distance_to_path(b.points[0], a, x0, x1) < reach + 1e-9
+    assert not (a_parked and b_parked)
+    return int(a_parked) - int(b_parked)
 
 
 def following_alone_allowed(wire: ScheduleRequest) -> list[bool]:
@@ -160,6 +174,20 @@ def test_following_only_for_co_directional_sections() -> None:
     assert len(crossing) == 2
     allowed = following_alone_allowed(wire)
     assert not any(allowed[m] for m in crossing)
+
+
+def test_a_start_near_but_outside_a_route_is_not_parked() -> None:
+    """r0 starts 0.5 m from r1's route (reach 0.4875 m) but its first 0.25 m piece comes
+    within reach: only r1 (which starts on r0's route) is parked, and r0 waits at its start.
+    Found by the motion property test: both were reported parked (a false 422)."""
+    robots = [
+        robot("r0", [[1.0, 0.0], [0.0, 0.0]], radius=0.21875, times=[0.0, 1.0]),
+        robot("r1", [[0.0, 0.0], [0.5, 0.0]], radius=0.21875, times=[0.0, 0.5]),
+    ]
+    req, graph = _graph(robots)
+    wire = assert_graph_sound(req, graph)
+    assert wire is not None and graph.forced.tolist() == [-1]
+    assert graph.conf_span[0, 0] == 0.0  # r0's section does start at its first point
 
 
 def test_parked_robot_passes_first() -> None:

@@ -19,7 +19,10 @@ from typing import Any
 import numpy as np
 from hypothesis import strategies as st
 
+from service.core.assignment import Assignments
+from service.core.evaluate import Evaluator
 from service.core.path_schemas import PathsRequest, PathsScheduleResponse
+from service.core.problem import problem_from_request
 from service.geometry.graph import GeometrySettings
 from service.geometry.paths import RobotPath
 from service.motion.plan import plan_paths
@@ -32,6 +35,8 @@ __all__ = [
     "OVERLAP_TOL",
     "SPEED_TOL",
     "assert_motion_valid",
+    "distance_to_path",
+    "evaluated_completion",
     "fleets",
     "path_arcs",
     "paths_of",
@@ -108,6 +113,19 @@ def wire_trajectories(req: PathsRequest, out: PathsScheduleResponse) -> list[Tra
     return result
 
 
+def distance_to_path(
+    q: np.ndarray, path: RobotPath, s0: float = 0.0, s1: float | None = None
+) -> float:
+    """Least distance from point q (2,) to the stretch [s0, s1] of ``path`` (default: all)."""
+    s1 = path.length if s1 is None else s1
+    inner = path.arc[(path.arc > s0) & (path.arc < s1)]
+    pts = path.position_at(np.concatenate([[s0], inner, [s1]]))  # (K, 2) the stretch's vertices
+    p0, d = pts[:-1], np.diff(pts, axis=0)
+    denom = np.maximum(np.einsum("nd,nd->n", d, d), 1e-300)
+    f = np.clip(np.einsum("nd,nd->n", q - p0, d) / denom, 0.0, 1.0)
+    return float(np.linalg.norm(p0 + f[:, None] * d - q, axis=1).min())
+
+
 def path_arcs(path: RobotPath, xy: np.ndarray) -> np.ndarray:
     """Arc length of every waypoint on ``path``, asserting the motion follows it in order.
 
@@ -168,6 +186,20 @@ def assert_motion_valid(req: PathsRequest, out: PathsScheduleResponse) -> None:
         arcs = path_arcs(path, tr.xy)
         assert abs(arcs[-1] - path.length) < 1e-5
         _assert_speeds(path, tr.t, arcs)
+
+
+def evaluated_completion(out: PathsScheduleResponse) -> dict[str, float]:
+    """Per robot of the answer's graph, its completion as the dispatcher's evaluator computes
+    it for the answer's own assignment (the graph-form view of the same decision)."""
+    assert out.graph is not None
+    a_first = np.array(
+        [a.from_ == c.a for a, c in zip(out.assignment, out.graph.conflicts, strict=True)]
+    )
+    following = np.array([a.type == "following" for a in out.assignment], dtype=bool)
+    problem = problem_from_request(out.graph)
+    evaluation = Evaluator(problem).evaluate(Assignments.single(a_first, following))
+    completion = evaluation.completion[0].tolist()
+    return {r.id: c for r, c in zip(out.graph.robots, completion, strict=True)}
 
 
 @st.composite
