@@ -5,8 +5,13 @@
   strictly separated and in path order.
 * **Conflicts**: one per pair of nodes of two robots that share a box; its pair
   section is the union box (the stretch of each path where that pair interferes).
-* **Density**: 2 (one robot may follow another) when every box touching the node
-  is co-directional, else 1 (crossings and head-on sections are exclusive).
+* **Following**: a conflict may be following-type when the pair drives some of its
+  section the same way (a co-directional box: one robot can trail the other) and
+  none of it head-on; pure crossings and head-on sections are exclusive.
+* **Density**: a node with a conflict that may be following holds as many robots
+  as fit nose to tail along it (at least 2), other nodes 1; an exclusive-only
+  conflict at a node of density > 1 gets its own density limit (its two nodes,
+  ``max_robots`` 1), so that the density rules forbid following exactly there.
 * **Fixed orders**: a robot is present at its first point from its start time
   until it moves, so when that point lies in a conflict's section the robot
   parked there must pass first. Two robots parked in each other's way, or a
@@ -36,6 +41,9 @@ __all__ = ["CoordinationGraph", "GeometrySettings", "build_graph"]
 # Intervals of one robot closer than this (metres) merge into one node: only exact
 # touching (shared piece ends, equal up to rounding) is meant.
 TOUCH_TOL = 1e-9
+# Most robots a node is said to hold in a row (its density): beyond a few dozen the clique
+# budgets (rho (rho + 1) / 2 - 1 following conflicts) no longer bind anyway.
+MAX_DENSITY = 50
 # Work bound of the narrow phase: paths longer in total than MAX_PIECES x resolution are
 # cut coarser (conservative sections, same safety) instead of exhausting memory.
 MAX_PIECES = 2_000_000
@@ -72,6 +80,7 @@ class CoordinationGraph:
     node_robot: np.ndarray  # (V,) int, robot of each node, nodes grouped by robot in path order
     node_span: np.ndarray  # (V, 2) float, [s_enter, s_exit] on its robot's path
     node_density: np.ndarray  # (V,) int, 1 or 2
+    conf_may_follow: np.ndarray  # (M,) bool, the conflict may be following-type
     conf_node: np.ndarray  # (M, 2) int, node of side a (robot i) and side b (robot j)
     conf_span: np.ndarray  # (M, 4) float, union box x0 x1 (on i) y0 y1 (on j)
     forced: np.ndarray  # (M,) int8, +1 side a first, -1 side b first, 0 free
@@ -152,9 +161,18 @@ class CoordinationGraph:
                 "objective": base.objective,
                 "robots": robots,
                 "conflicts": conflicts,
+                "density_limits": [
+                    {"nodes": [ids[a], ids[b]], "max_robots": 1} for a, b in self.exclusive_pairs()
+                ],
                 "options": base.options.model_dump(),
             }
         )
+
+    def exclusive_pairs(self) -> list[tuple[int, int]]:
+        """Node pairs of the exclusive-only conflicts that node densities alone would not
+        keep exclusive (a node of density 2 at either end)."""
+        dense = self.node_density[self.conf_node].max(axis=1) > 1  # (M,)
+        return [tuple(p) for p in self.conf_node[~self.conf_may_follow & dense].tolist()]
 
 
 def build_graph(paths: Sequence[RobotPath], settings: GeometrySettings) -> CoordinationGraph:
@@ -176,11 +194,15 @@ def build_graph(paths: Sequence[RobotPath], settings: GeometrySettings) -> Coord
     box_start = np.append(first, key.size)
     conf_node = np.stack([box_node_i[first], box_node_j[first]], axis=1)  # (M, 2)
     conf_span = _union_boxes(boxes, first)
+    may_follow = _may_follow(boxes, first)
     graph = CoordinationGraph(
         paths=tuple(paths),
         node_robot=node_robot,
         node_span=node_span,
-        node_density=_densities(node_robot.size, box_node_i, box_node_j, boxes.co_directional),
+        node_density=_densities(
+            paths, node_robot, node_span, conf_node, may_follow, settings.margin
+        ),
+        conf_may_follow=may_follow,
         conf_node=conf_node,
         conf_span=conf_span,
         forced=_parked_orders(paths, boxes, first, conf_span, settings.margin),
@@ -200,7 +222,12 @@ def _merge_nodes(boxes: Boxes) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.n
     robot = np.concatenate([boxes.i, boxes.j])  # (2B,)
     lo = np.concatenate([boxes.x0, boxes.y0])
     hi = np.concatenate([boxes.x1, boxes.y1])
-    order = np.lexsort((lo, robot))
+    if robot.size == 0:
+        empty = np.zeros(0, dtype=np.int64)
+        return empty, np.zeros((0, 2)), empty, empty
+    # One float key orders by (robot, lo): measured ~10x faster than lexsort here.
+    stride = float(hi.max()) + 1.0
+    order = np.argsort(robot * stride + lo)
     robot_s, lo_s, hi_s = robot[order], lo[order], hi[order]
     # A new node starts where the robot changes or the interval starts after every
     # interval before it (of the same robot) has ended.
@@ -209,12 +236,10 @@ def _merge_nodes(boxes: Boxes) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.n
         reach = np.maximum.accumulate(hi_s[r_start:r_end])
         new[r_start + 1 : r_end] = lo_s[r_start + 1 : r_end] > reach[:-1] + TOUCH_TOL
     node_of_sorted = np.cumsum(new) - 1  # (2B,)
-    n_nodes = int(node_of_sorted[-1]) + 1 if new.size else 0
-    node_lo = np.full(n_nodes, np.inf)
-    node_hi = np.full(n_nodes, -np.inf)
-    np.minimum.at(node_lo, node_of_sorted, lo_s)
-    np.maximum.at(node_hi, node_of_sorted, hi_s)
-    node_robot = robot_s[new] if new.size else np.zeros(0, dtype=np.int64)
+    first = np.flatnonzero(new)  # (V,) where each node starts in the sorted order
+    node_lo = np.minimum.reduceat(lo_s, first)
+    node_hi = np.maximum.reduceat(hi_s, first)
+    node_robot = robot_s[first]
     node_of = np.empty_like(node_of_sorted)
     node_of[order] = node_of_sorted
     return (
@@ -249,14 +274,38 @@ def _union_boxes(boxes: Boxes, first: np.ndarray) -> np.ndarray:
     )
 
 
+def _may_follow(boxes: Boxes, first: np.ndarray) -> np.ndarray:
+    """(M,) bool: some of the conflict's boxes co-directional and none head-on."""
+    if first.size == 0:
+        return np.zeros(0, dtype=bool)
+    same_way = np.logical_or.reduceat(boxes.co_directional, first)
+    head_on = np.logical_or.reduceat(boxes.head_on, first)
+    return same_way & ~head_on
+
+
 def _densities(
-    n_nodes: int, node_i: np.ndarray, node_j: np.ndarray, co_directional: np.ndarray
+    paths: Sequence[RobotPath],
+    node_robot: np.ndarray,
+    node_span: np.ndarray,
+    conf_node: np.ndarray,
+    may_follow: np.ndarray,
+    margin: float,
 ) -> np.ndarray:
-    """(V,) 2 where every box touching the node is co-directional, else 1."""
-    crossing = np.zeros(n_nodes, dtype=bool)
-    crossing[node_i[~co_directional]] = True
-    crossing[node_j[~co_directional]] = True
-    return np.where(crossing, 1, 2).astype(np.int64)
+    """(V,) how many robots the node's stretch holds in a row, where it may be followed.
+
+    A node with a conflict that may be following-type holds as many robots as fit
+    along it nose to tail (its length over the robot's diameter plus the margin,
+    at least 2, at most MAX_DENSITY); other nodes hold 1. The density rules then
+    bound the following-type conflicts among nodes that interfere with each other
+    by the fewest robots any of them holds.
+    """
+    radius = np.array([p.radius for p in paths])[node_robot]  # (V,)
+    length = node_span[:, 1] - node_span[:, 0]
+    fits = np.floor(length / (2.0 * radius + margin)).astype(np.int64)
+    density = np.ones(node_robot.size, dtype=np.int64)
+    followed = np.unique(conf_node[may_follow].ravel())
+    density[followed] = np.clip(fits[followed], 2, MAX_DENSITY)
+    return density
 
 
 def _parked_orders(

@@ -82,6 +82,7 @@ class Boxes:
     y0: np.ndarray  # (B,) float, robot j's stretch [y0, y1]
     y1: np.ndarray
     co_directional: np.ndarray  # (B,) bool, headings within CO_DIRECTIONAL_DEG
+    head_on: np.ndarray  # (B,) bool, headings within CO_DIRECTIONAL_DEG of opposite
 
     @property
     def size(self) -> int:
@@ -235,4 +236,5 @@ def interference_boxes(
         y0=box[:, 2],
         y1=box[:, 3],
         co_directional=cos > np.cos(np.radians(CO_DIRECTIONAL_DEG)),
+        head_on=cos < -np.cos(np.radians(CO_DIRECTIONAL_DEG)),
     )
