@@ -13,7 +13,11 @@ from typing import Any
 
 import pytest
 
+from service.core.path_schemas import PathsRequest, SimulationRequest
 from service.core.schemas import ScheduleRequest
+from service.geometry.graph import GeometrySettings
+from service.motion.plan import plan_paths
+from service.simulation.simulate import simulate
 from service.solvers.dispatch import DispatchPolicy, dispatch
 
 SCHEMAS = Path(__file__).resolve().parents[1] / "schemas"
@@ -87,3 +91,36 @@ def test_a_response_validates_against_the_response_schema() -> None:
 def test_response_schema_names_from_by_alias() -> None:
     schema = _load(SCHEMAS / "response.schema.json")
     assert "from" in schema["$defs"]["AssignmentOut"]["properties"]
+
+
+PATHS_EXAMPLES = sorted(p.name for p in (SCHEMAS / "examples" / "paths").glob("*.json"))
+
+
+@pytest.mark.parametrize("name", PATHS_EXAMPLES)
+def test_paths_examples_plan_and_validate_against_their_schemas(name: str) -> None:
+    """Each paths example is a valid body whose answer validates and posts back as a graph."""
+    body = _load(SCHEMAS / "examples" / "paths" / name)
+    _validator("paths-request.schema.json").validate(body)
+    answer = plan_paths(PathsRequest.model_validate(body), DispatchPolicy(), GeometrySettings())
+    wire = answer.model_dump(mode="json", by_alias=True)
+    _validator("paths-response.schema.json").validate(wire)
+    assert answer.checks.collision_free
+    _validator("request.schema.json").validate(wire["graph"])
+    ScheduleRequest.model_validate(wire["graph"])
+    simulation = {"robots": body["robots"], "dependencies": wire["dependencies"]}
+    _validator("simulation-request.schema.json").validate(simulation)
+    report = simulate(SimulationRequest.model_validate(simulation))
+    _validator("simulation-response.schema.json").validate(report.model_dump(mode="json"))
+    assert report.collision_free and not report.deadlocked
+
+
+def test_paths_request_schema_rejects_mixed_forms() -> None:
+    validator = _validator("paths-request.schema.json")
+    tiny = _load(SCHEMAS / "examples" / "paths" / "tiny.json")
+    assert validator.is_valid(tiny)
+    for broken in (
+        {**tiny, "conflicts": []},
+        {**tiny, "robots": [{**tiny["robots"][0], "nodes": []}]},
+        {**tiny, "robots": [{**tiny["robots"][0], "radius": 0}]},
+    ):
+        assert not validator.is_valid(broken)
