@@ -18,7 +18,6 @@ from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from service.core.schemas import MAX_TIME_LIMIT_S
-from service.solvers.dispatch import DispatchPolicy
 
 __all__ = ["MIB", "Settings", "get_settings"]
 
@@ -57,6 +56,19 @@ class Settings(BaseSettings):
     # their product should not exceed the machine's cores.
     exact_workers: int = Field(default=1, ge=1)
     solve_concurrency: int = Field(default=2, ge=1)
+    # Solves waiting for a slot beyond the running ones; when full, 503 with Retry-After
+    # (retry_after_s, also sent while the service is not ready).
+    queue_size: int = Field(default=8, ge=0)
+    retry_after_s: int = Field(default=1, ge=1)
+    # Intra-op threads of torch per process (None: cores / solve_concurrency, at least 1),
+    # so concurrent solves do not oversubscribe the cores.
+    torch_threads: int | None = Field(default=None, ge=1)
+    # Work bound of the clique enumeration (413 above it): conflicts summed over the maximal
+    # cliques. Complete multipartite conflict graphs have exponentially many cliques; a
+    # sparse graph has about one incidence per conflict (5,000 robots, 100,000 conflicts:
+    # 102,512). Measured at 327,680 (5 robots x 8 nodes, all conflicting): solves overran a
+    # 5 s limit by up to 2.6 s; at 1,000,000 by 7.7 s.
+    max_clique_incidences: int = Field(default=250_000, ge=1)
     # Paths form (docs/paths.md): pieces of at most this many metres (sections and following
     # gaps are conservative by up to this much) and this much clearance kept between
     # footprints beyond their radii; caps on path points (413 above them) and on the
@@ -80,15 +92,6 @@ class Settings(BaseSettings):
         if value == "auto":
             raise ValueError("large_solver must name a concrete solver, not 'auto'")
         return value
-
-    def dispatch_policy(self) -> DispatchPolicy:
-        """The routing and limits :func:`service.solvers.dispatch.dispatch` applies."""
-        return DispatchPolicy(
-            default_time_limit_s=self.default_time_limit_s,
-            exact_max_conflicts=self.exact_max_conflicts,
-            large_solver=self.large_solver,
-            exact_workers=self.exact_workers,
-        )
 
 
 @lru_cache

@@ -6,12 +6,20 @@ from typing import Annotated
 
 from fastapi import Depends, FastAPI, Request
 
-from service.api.errors import Unavailable
+from service.api.errors import NotReady, Unavailable
 from service.api.metrics import Metrics
+from service.api.request_log import RequestRecord, record_of
 from service.api.runtime import Runtime
 from service.settings import Settings, get_settings
 
-__all__ = ["MetricsDep", "RuntimeDep", "SettingsDep", "resolve_settings"]
+__all__ = [
+    "MetricsDep",
+    "ReadyRuntimeDep",
+    "RecordDep",
+    "RuntimeDep",
+    "SettingsDep",
+    "resolve_settings",
+]
 
 SettingsDep = Annotated[Settings, Depends(get_settings)]
 
@@ -29,10 +37,28 @@ def get_runtime(request: Request) -> Runtime:
     return runtime
 
 
+def get_ready_runtime(request: Request) -> Runtime:
+    """The runtime once warm-up finished; before, 503 with Retry-After (every solve needs it)."""
+    runtime = get_runtime(request)
+    if not runtime.ready:
+        raise NotReady(runtime.limiter.retry_after_s, runtime.detail)
+    return runtime
+
+
+def get_record(request: Request) -> RequestRecord:
+    """The request's log record, opened by :class:`service.api.middleware.RequestLogMiddleware`."""
+    record = record_of(request.scope)
+    if record is None:
+        raise RuntimeError("RequestLogMiddleware is not installed")
+    return record
+
+
 def get_metrics(request: Request) -> Metrics:
     """The app's metrics."""
     return request.app.state.metrics
 
 
 RuntimeDep = Annotated[Runtime, Depends(get_runtime)]
+ReadyRuntimeDep = Annotated[Runtime, Depends(get_ready_runtime)]
+RecordDep = Annotated[RequestRecord, Depends(get_record)]
 MetricsDep = Annotated[Metrics, Depends(get_metrics)]

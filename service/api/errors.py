@@ -1,4 +1,4 @@
-"""The API's errors and the one function that renders them.
+"""The API's errors and the one function that renders them (the catch-all is in middleware).
 
 Exception tree (each class carries its HTTP status and the ``reason`` label of
 the rejected-requests metric)::
@@ -6,8 +6,13 @@ the rejected-requests metric)::
     ApiError
     ├── InvalidRequest   422  the body fails the schema, or is not JSON       (validation)
     ├── InvalidProblem   422  well-typed, but breaks a cross-field rule       (problem_rule)
-    ├── TooLarge         413  body bytes, robots, nodes or conflicts over cap (too_large)
+    ├── TooLarge         413  body bytes, robots, nodes, conflicts or cliques over cap
+    │                                                                          (too_large)
     └── Unavailable      503  anything unexpected; logged, never a 500        (internal)
+        ├── Saturated    503  every solve slot busy and the queue full        (saturated)
+        └── NotReady     503  models not loaded yet (warm-up)                 (not_ready)
+
+Saturated and NotReady carry a ``Retry-After`` header (seconds, ``retry_after_s``).
 
 422 bodies keep FastAPI's format, ``{"detail": [{"loc", "msg", "type"}]}``; the
 others are ``{"detail": "<message>"}``. Validation errors do not echo the
@@ -16,31 +21,29 @@ offending input back: it may be huge, and NaN is not valid JSON.
 
 from __future__ import annotations
 
-import logging
+from collections.abc import Mapping
 from typing import Any, ClassVar
 
 from fastapi import Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
-from starlette.types import Message, Receive, Scope, Send
 
 from service.api.metrics import Metrics
-from service.api.middleware import HttpMiddleware
+from service.api.request_log import note
 from service.core.problem import ProblemError
 
 __all__ = [
     "ApiError",
-    "CatchAllMiddleware",
     "InvalidRequest",
     "InvalidProblem",
+    "NotReady",
+    "Saturated",
     "TooLarge",
     "Unavailable",
     "error_response",
     "handle_api_error",
     "handle_validation_error",
 ]
-
-log = logging.getLogger(__name__)
 
 Detail = str | list[dict[str, Any]]
 # Tags of the two body forms of POST /v1/schedules (service.api.routes.schedules).
@@ -53,9 +56,10 @@ class ApiError(Exception):
     status_code: ClassVar[int]
     reason: ClassVar[str]
 
-    def __init__(self, detail: Detail) -> None:
+    def __init__(self, detail: Detail, headers: Mapping[str, str] | None = None) -> None:
         super().__init__(detail)
         self.detail = detail
+        self.headers = dict(headers or {})
 
 
 class InvalidRequest(ApiError):
@@ -115,45 +119,42 @@ class Unavailable(ApiError):
     reason = "internal"
 
 
+class Saturated(Unavailable):
+    """Every solve slot is busy and the queue of waiting solves is full."""
+
+    reason = "saturated"
+
+    def __init__(self, retry_after_s: int) -> None:
+        super().__init__(
+            "the scheduler is saturated (every solve slot busy, the queue full); retry later",
+            {"Retry-After": str(retry_after_s)},
+        )
+
+
+class NotReady(Unavailable):
+    """The service is warming up (loading models); it takes requests once ``/readyz`` is 200."""
+
+    reason = "not_ready"
+
+    def __init__(self, retry_after_s: int, detail: str) -> None:
+        super().__init__(
+            f"the scheduler is not ready yet ({detail}); retry later",
+            {"Retry-After": str(retry_after_s)},
+        )
+
+
 def error_response(exc: ApiError, metrics: Metrics) -> JSONResponse:
     """Render ``exc`` and count the rejection."""
     metrics.rejected.labels(exc.reason).inc()
-    return JSONResponse({"detail": exc.detail}, status_code=exc.status_code)
+    return JSONResponse({"detail": exc.detail}, status_code=exc.status_code, headers=exc.headers)
 
 
 async def handle_api_error(request: Request, exc: ApiError) -> JSONResponse:
     """Exception handler for :class:`ApiError` raised in routes and dependencies."""
+    note(request.scope, outcome=exc.reason)
     return error_response(exc, request.app.state.metrics)
 
 
 async def handle_validation_error(request: Request, exc: RequestValidationError) -> JSONResponse:
     """Exception handler replacing FastAPI's default for request validation errors."""
     return await handle_api_error(request, InvalidRequest.from_validation(exc))
-
-
-class CatchAllMiddleware(HttpMiddleware):
-    """Turns any exception no handler rendered into a logged 503.
-
-    Starlette's own catch-all (``ServerErrorMiddleware``) answers 500 and re-raises;
-    this sits inside it so no exception ever reaches it while a response can still be sent.
-    """
-
-    async def handle_http(self, scope: Scope, receive: Receive, send: Send) -> None:
-        started = False
-
-        async def send_tracked(message: Message) -> None:
-            nonlocal started
-            started = started or message["type"] == "http.response.start"
-            await send(message)
-
-        try:
-            await self.app(scope, receive, send_tracked)
-        except Exception as exc:
-            if started:
-                raise
-            log.exception("unexpected error in %s %s", scope["method"], scope["path"])
-            failure = Unavailable(
-                f"the scheduler failed unexpectedly ({type(exc).__name__}); the error was "
-                "logged, retry later or report it"
-            )
-            await error_response(failure, self.metrics)(scope, receive, send)

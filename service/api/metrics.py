@@ -6,14 +6,27 @@ the client library), durations are histograms in ``*_seconds``.
 
 from __future__ import annotations
 
-from prometheus_client import CollectorRegistry, Counter, Histogram, generate_latest
+from typing import TYPE_CHECKING
+
+from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram, generate_latest
 
 from service.core.schemas import ScheduleResponse
 
+if TYPE_CHECKING:  # runtime imports the errors, which import these metrics
+    from service.api.runtime import SolvePool
+
 __all__ = ["REJECT_REASONS", "Metrics"]
 
-# Why a request was refused: schema validation, a size cap, a cross-field rule, or our fault.
-REJECT_REASONS = ("validation", "too_large", "problem_rule", "internal")
+# Why a request was refused: schema validation, a size cap, a cross-field rule, our fault,
+# a full queue, or not ready yet.
+REJECT_REASONS = (
+    "validation",
+    "too_large",
+    "problem_rule",
+    "internal",
+    "saturated",
+    "not_ready",
+)
 # Solve times from a tiny problem (~5 ms) to the largest allowed time limit (300 s).
 SOLVE_BUCKETS = (0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1, 2.5, 5, 10, 30, 60, 120, 300)
 # Robots and conflicts per problem, up to the default caps (5000 robots, 200000 conflicts).
@@ -66,6 +79,21 @@ class Metrics:
         )
         for reason in REJECT_REASONS:
             self.rejected.labels(reason)
+        self.queued = Gauge(
+            "scheduler_queued_solves",
+            "Solves waiting for a slot.",
+            registry=self.registry,
+        )
+        self.running = Gauge(
+            "scheduler_running_solves",
+            "Solves holding a slot.",
+            registry=self.registry,
+        )
+
+    def watch_pool(self, pool: SolvePool) -> None:
+        """Read the queue length and running solves from ``pool`` at every scrape."""
+        self.queued.set_function(lambda: pool.waiting)
+        self.running.set_function(lambda: pool.running)
 
     def observe_request(self, route: str, method: str, status: int, seconds: float) -> None:
         """Count one HTTP request and its latency."""

@@ -5,11 +5,9 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from typing import TypeVar
 
-from anyio import CapacityLimiter, to_thread
-
-from service.api.errors import InvalidProblem, TooLarge
+from service.api.errors import TooLarge
+from service.api.runtime import SolvePool
 from service.core.path_schemas import PathRobotIn
-from service.core.problem import ProblemError
 from service.geometry.graph import GeometrySettings
 from service.geometry.interference import TooComplex
 from service.settings import Settings
@@ -47,11 +45,9 @@ def check_path_caps(robots: Sequence[PathRobotIn], settings: Settings) -> None:
         raise TooLarge("problem too large: " + "; ".join(over))
 
 
-async def run_paths_work(work: Callable[[], T], limiter: CapacityLimiter) -> T:
-    """Run blocking paths-form work in a worker thread, mapping its errors to API errors."""
+async def run_paths_work(work: Callable[[], T], limiter: SolvePool) -> T:
+    """Run blocking paths-form work in the solve pool, mapping its errors to API errors."""
     try:
-        return await to_thread.run_sync(work, limiter=limiter)
-    except ProblemError as exc:
-        raise InvalidProblem.from_problem_error(exc) from exc
+        return await limiter.run(work)
     except TooComplex as exc:
         raise TooLarge(str(exc)) from exc

@@ -1,19 +1,38 @@
-"""What the lifespan prepares and the routes read: solve policy, thread limiter, readiness."""
+"""What the lifespan prepares and the routes read: solve policy, solve pool, readiness."""
 
 from __future__ import annotations
 
 import logging
+import os
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import TypeVar
 
-from anyio import CapacityLimiter
+from anyio import CapacityLimiter, WouldBlock, to_thread
 
+from service.api.errors import InvalidProblem, Saturated, TooLarge
+from service.api.request_log import RequestRecord
+from service.core.cliques import TooManyCliques, clique_budget
+from service.core.problem import ProblemError
 from service.core.schemas import OBJECTIVES, OptionsIn, ScheduleRequest
+from service.settings import Settings
 from service.solvers.dispatch import LAST_RESORT, DispatchPolicy, dispatch
 from service.solvers.registry import solver_names
 
-__all__ = ["WARMUP_REQUEST", "Runtime", "load_models", "missing_solvers", "warm_up"]
+__all__ = [
+    "WARMUP_REQUEST",
+    "Runtime",
+    "SolvePool",
+    "build_runtime",
+    "dispatch_policy",
+    "load_models",
+    "missing_solvers",
+    "warm_up",
+]
+
+T = TypeVar("T")
 
 log = logging.getLogger(__name__)
 
@@ -31,13 +50,86 @@ WARMUP_REQUEST = ScheduleRequest.model_validate(
 )
 
 
+class SolvePool:
+    """Where requests' blocking work runs: worker threads, bounded in number, queue and work.
+
+    At most ``slots`` run at once; at most ``queue_size`` more wait for a slot, and a
+    request beyond that is refused at once (:class:`Saturated`, 503 with Retry-After)
+    rather than queued without bound. Each work item runs within the clique budget.
+    Only the event loop touches the counters, so they need no lock.
+    """
+
+    def __init__(
+        self, slots: int, queue_size: int, retry_after_s: int, max_clique_incidences: int
+    ) -> None:
+        self.slots = CapacityLimiter(slots)
+        self.queue_size = queue_size
+        self.retry_after_s = retry_after_s
+        self.max_clique_incidences = max_clique_incidences
+        self.waiting = 0
+
+    @property
+    def running(self) -> int:
+        """Work items holding a slot."""
+        return int(self.slots.borrowed_tokens)
+
+    async def run(self, work: Callable[[], T], record: RequestRecord | None = None) -> T:
+        """``work()`` in a worker thread once a slot is free, with the core's errors as API errors.
+
+        The time spent waiting and working goes to ``record`` (the request's log line).
+
+        Raises:
+            Saturated: every slot busy and ``queue_size`` items already waiting.
+            InvalidProblem: the problem breaks a cross-field rule (422).
+            TooLarge: the conflict graph's cliques exceed the budget (413).
+        """
+        queued = time.monotonic()
+        await self._take_slot()
+        started = time.monotonic()
+        try:
+            return await to_thread.run_sync(self._bounded, work)
+        except ProblemError as exc:
+            raise InvalidProblem.from_problem_error(exc) from exc
+        except TooManyCliques as exc:
+            raise TooLarge(str(exc)) from exc
+        finally:
+            self.slots.release()
+            if record is not None:
+                record.fields.update(
+                    queue_s=round(started - queued, 6), solve_s=round(time.monotonic() - started, 6)
+                )
+
+    async def _take_slot(self) -> None:
+        """A free slot at once, else a place in the queue until one frees; :class:`Saturated`."""
+        try:
+            self.slots.acquire_nowait()
+            return
+        except WouldBlock:
+            if self.waiting >= self.queue_size:
+                raise Saturated(self.retry_after_s) from None
+        self.waiting += 1
+        try:
+            await self.slots.acquire()
+        finally:
+            self.waiting -= 1
+
+    def _bounded(self, work: Callable[[], T]) -> T:
+        """``work()`` within the clique budget (in the worker thread's own context)."""
+        with clique_budget(self.max_clique_incidences):
+            return work()
+
+
 @dataclass(eq=False)
 class Runtime:
-    """Per-app state built by the lifespan; ``ready`` turns true once warm-up succeeded."""
+    """Per-app state built by the lifespan; ``ready`` turns true once warm-up succeeded.
+
+    ``limiter`` is the pool every route's blocking work goes through.
+    """
 
     policy: DispatchPolicy
-    limiter: CapacityLimiter
+    limiter: SolvePool
     model_store: Path | None = None
+    torch_threads: int | None = None  # intra-op threads of torch (None: torch's default)
     ready: bool = False
     detail: str = "warming up"
     model_errors: dict[str, str] = field(default_factory=dict)
@@ -46,6 +138,38 @@ class Runtime:
     def models(self) -> dict[str, str]:
         """Loaded learned models: objective -> model name."""
         return {objective: m.name for objective, m in self.policy.models.items()}
+
+
+def dispatch_policy(settings: Settings) -> DispatchPolicy:
+    """The routing and limits :func:`service.solvers.dispatch.dispatch` applies."""
+    return DispatchPolicy(
+        default_time_limit_s=settings.default_time_limit_s,
+        exact_max_conflicts=settings.exact_max_conflicts,
+        large_solver=settings.large_solver,
+        exact_workers=settings.exact_workers,
+    )
+
+
+def build_runtime(settings: Settings) -> Runtime:
+    """A runtime (not ready, no models yet) with the policy, pool and threads of ``settings``.
+
+    Torch gets the cores left per concurrent solve unless ``torch_threads`` says otherwise:
+    by default every solve's torch would use every core, and concurrent solves would
+    oversubscribe them.
+    """
+    pool = SolvePool(
+        settings.solve_concurrency,
+        settings.queue_size,
+        settings.retry_after_s,
+        settings.max_clique_incidences,
+    )
+    cores_per_solve = max(1, (os.cpu_count() or 1) // settings.solve_concurrency)
+    return Runtime(
+        dispatch_policy(settings),
+        pool,
+        model_store=settings.model_store,
+        torch_threads=settings.torch_threads or cores_per_solve,
+    )
 
 
 def missing_solvers(policy: DispatchPolicy) -> list[str]:
@@ -60,8 +184,12 @@ def load_models(runtime: Runtime, store: Path) -> None:
     An objective whose model is missing or corrupt is logged and listed in
     ``runtime.model_errors``; requests for it degrade to the exact solver.
     """
-    from service.learning.store import load_all  # torch is imported only here
+    import torch  # torch is imported only here
 
+    from service.learning.store import load_all
+
+    if runtime.torch_threads is not None:
+        torch.set_num_threads(runtime.torch_threads)
     models, errors = load_all(store, OBJECTIVES)
     runtime.policy = replace(runtime.policy, models=models)
     runtime.model_errors = errors

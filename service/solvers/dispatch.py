@@ -81,8 +81,15 @@ def choose_solver(request: ScheduleRequest, n_conflicts: int, policy: DispatchPo
     return "exact" if n_conflicts <= policy.exact_max_conflicts else policy.large_solver
 
 
-def dispatch(request: ScheduleRequest, policy: DispatchPolicy) -> ScheduleResponse:
+def dispatch(
+    request: ScheduleRequest, policy: DispatchPolicy, *, deadline: float | None = None
+) -> ScheduleResponse:
     """Solve ``request`` and return a checked response.
+
+    Args:
+        deadline: ``time.monotonic()`` by which the solver must stop (the request's
+            arrival plus its time limit, so time spent queueing counts); the solver gets
+            the time left if that is less than its time limit.
 
     Raises:
         ProblemError: the request breaks a cross-field rule of the contract.
@@ -92,7 +99,7 @@ def dispatch(request: ScheduleRequest, policy: DispatchPolicy) -> ScheduleRespon
     ctx = SolveContext(
         problem=problem,
         objective=request.objective,
-        time_limit_s=opts.time_limit_s or policy.default_time_limit_s,
+        time_limit_s=_time_left(opts.time_limit_s or policy.default_time_limit_s, deadline),
         seed=opts.seed,
         samples=opts.samples,
         workers=policy.exact_workers,
@@ -119,6 +126,13 @@ def dispatch(request: ScheduleRequest, policy: DispatchPolicy) -> ScheduleRespon
         forced=bool(checks.forced[0]),
     )
     return _render(request, ctx, output, info, checked)
+
+
+def _time_left(time_limit_s: float, deadline: float | None) -> float:
+    """``time_limit_s``, or less if ``deadline`` comes sooner (never negative)."""
+    if deadline is None:
+        return time_limit_s
+    return max(0.0, min(time_limit_s, deadline - time.monotonic()))
 
 
 def _first_valid_answer(ctx: SolveContext, name: str) -> tuple[str, SolverOutput, CheckResult]:

@@ -71,3 +71,60 @@ def assert_valid_answer(request: dict[str, Any], answer: dict[str, Any]) -> None
     assert check(problem, find_cliques(problem), assignments).ok[0]
     cost = Evaluator(problem).evaluate(assignments).costs[objective][0]
     assert cost == pytest.approx(answer["cost"], rel=1e-9, abs=1e-9)
+
+
+def multipartite(robots: int, nodes: int, time_limit_s: float = 1.0) -> dict[str, Any]:
+    """A complete multipartite conflict graph: every node of every robot conflicts with
+    every node of every other robot, so it has nodes^robots maximal cliques.
+    """
+    request: dict[str, Any] = {
+        "robots": [
+            {
+                "id": f"r{r}",
+                "nodes": [
+                    {"id": f"r{r}n{i}", "enter": 10.0 * i, "exit": 10.0 * i + 5, "density": 2}
+                    for i in range(nodes)
+                ],
+            }
+            for r in range(robots)
+        ],
+        "conflicts": [
+            {"a": f"r{a}n{i}", "b": f"r{b}n{j}"}
+            for a in range(robots)
+            for b in range(a + 1, robots)
+            for i in range(nodes)
+            for j in range(nodes)
+        ],
+        "options": {"time_limit_s": time_limit_s},
+    }
+    return request
+
+
+def long_chain(robots: int, chain: int, time_limit_s: float = 1.0) -> dict[str, Any]:
+    """One robot with ``chain`` nodes, crossed twice by each of ``robots - 1`` short robots.
+
+    The shape of issue 14's memory hog: work that grows with robots x the longest path.
+    """
+    nodes = [{"id": f"L{i}", "enter": 10.0 * i, "exit": 10.0 * i + 5} for i in range(chain)]
+    request: dict[str, Any] = {
+        "robots": [{"id": "L", "nodes": nodes}],
+        "conflicts": [],
+        "options": {"time_limit_s": time_limit_s},
+    }
+    for r in range(1, robots):
+        base = (r * 97) % max(1, chain - 7)
+        request["robots"].append(
+            {
+                "id": f"r{r}",
+                "nodes": [
+                    {
+                        "id": f"r{r}n{j}",
+                        "enter": 10.0 * (base + 3 * j),
+                        "exit": 10.0 * (base + 3 * j) + 6,
+                    }
+                    for j in range(3)
+                ],
+            }
+        )
+        request["conflicts"] += [{"a": f"L{base + 3 * j}", "b": f"r{r}n{j}"} for j in (0, 2)]
+    return request

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import AsyncIterator, Callable
 from typing import Any
 
@@ -15,7 +16,7 @@ from service.settings import Settings
 from service.solvers import dispatch as dispatch_module
 from service.solvers.registry import SolveContext, SolverOutput
 
-from .helpers import TINY, Serve, post_json
+from .helpers import TINY, Serve, multipartite, post_json
 
 pytestmark = pytest.mark.anyio
 
@@ -265,3 +266,21 @@ async def test_solver_failure_is_503_never_500(
     assert response.status_code == 503
     assert "failed unexpectedly" in response.json()["detail"]
     assert "unexpected error in POST /v1/schedules" in caplog.text
+
+
+async def test_a_conflict_graph_with_too_many_cliques_is_413_in_time(
+    client: httpx.AsyncClient,
+) -> None:
+    request = multipartite(8, 5, time_limit_s=30.0)  # 5^8 = 390,625 maximal cliques
+    start = time.monotonic()
+    response = await post_json(client, request)
+    assert response.status_code == 413, response.text
+    assert "more than 250000 conflicts in all (max_clique_incidences)" in response.json()["detail"]
+    assert time.monotonic() - start < 5.0  # refused long before its time limit
+
+
+async def test_the_clique_budget_is_a_setting(serve: Serve) -> None:
+    async with serve(Settings(max_clique_incidences=2)) as client:
+        response = await post_json(client, multipartite(3, 1))  # one clique of 3 conflicts
+    assert response.status_code == 413
+    assert "more than 2 conflicts in all (max_clique_incidences)" in response.json()["detail"]

@@ -13,7 +13,9 @@ import httpx
 import pytest
 from anyio import to_thread
 
+from service import main as main_module
 from service.api import runtime as runtime_module
+from service.api.runtime import Runtime
 from service.core.schemas import OBJECTIVES
 from service.main import create_app
 from service.settings import DEFAULT_MODEL_STORE, Settings
@@ -169,7 +171,7 @@ async def test_solves_beyond_solve_concurrency_wait(
     async with serve(Settings(solve_concurrency=1), app=app) as client:
         blocking = BlockingSolver()
         blocking.install(monkeypatch)
-        limiter = app.state.runtime.limiter
+        pool = app.state.runtime.limiter
         responses: list[httpx.Response] = []
         async with anyio.create_task_group() as tasks:
 
@@ -180,10 +182,98 @@ async def test_solves_beyond_solve_concurrency_wait(
             tasks.start_soon(solve)
             try:
                 with anyio.fail_after(WAIT_S):
-                    while limiter.statistics().tasks_waiting < 1:
+                    while pool.waiting < 1 or not blocking.started.is_set():
                         await anyio.sleep(0.01)
-                assert blocking.entered == 1 and limiter.borrowed_tokens == 1
+                assert blocking.entered == 1 and pool.running == 1
+                metrics = (await client.get("/metrics")).text
+                assert "scheduler_queued_solves 1.0" in metrics
+                assert "scheduler_running_solves 1.0" in metrics
             finally:
                 blocking.release.set()
     assert [r.status_code for r in responses] == [200, 200]
     assert blocking.entered == 2
+
+
+async def test_a_full_queue_is_503_with_retry_after(
+    serve: Serve, monkeypatch: pytest.MonkeyPatch, tiny: dict
+) -> None:
+    app = create_app()
+    settings = Settings(solve_concurrency=1, queue_size=1, retry_after_s=3)
+    async with serve(settings, app=app) as client:
+        blocking = BlockingSolver()
+        blocking.install(monkeypatch)
+        pool = app.state.runtime.limiter
+        responses: list[httpx.Response] = []
+        async with anyio.create_task_group() as tasks:
+
+            async def solve() -> None:
+                responses.append(await post_json(client, tiny))
+
+            tasks.start_soon(solve)
+            tasks.start_soon(solve)
+            try:
+                with anyio.fail_after(WAIT_S):
+                    while pool.waiting < 1 or not blocking.started.is_set():
+                        await anyio.sleep(0.01)
+                refused = await post_json(client, tiny)
+            finally:
+                blocking.release.set()
+        rejected = (await client.get("/metrics")).text
+    assert refused.status_code == 503 and refused.headers["retry-after"] == "3"
+    assert "saturated" in refused.json()["detail"]
+    assert 'scheduler_rejected_requests_total{reason="saturated"} 1.0' in rejected
+    assert [r.status_code for r in responses] == [200, 200]
+
+
+async def test_queue_wait_counts_in_the_time_limit(
+    serve: Serve, monkeypatch: pytest.MonkeyPatch, tiny: dict
+) -> None:
+    app = create_app()
+    async with serve(Settings(solve_concurrency=1), app=app) as client:
+        seen: list[float] = []
+        real = dispatch_module.get_solver
+
+        def spy(name: str) -> Any:
+            solver = real(name)
+
+            def solve(ctx: SolveContext) -> SolverOutput | None:
+                seen.append(ctx.time_limit_s)
+                return solver(ctx)
+
+            return solve
+
+        blocking = BlockingSolver()
+        blocking.install(monkeypatch)
+        async with anyio.create_task_group() as tasks:
+            tasks.start_soon(post_json, client, tiny)
+            with anyio.fail_after(WAIT_S):
+                while not blocking.started.is_set():
+                    await anyio.sleep(0.01)
+            tiny["options"] = {"solver": "fcfs", "time_limit_s": 2.0}
+            tasks.start_soon(post_json, client, tiny)
+            await anyio.sleep(0.5)
+            monkeypatch.setattr(dispatch_module, "get_solver", spy)
+            blocking.release.set()
+    assert seen and seen[0] < 1.6  # waited >= 0.5 s of its 2 s in the queue
+
+
+async def test_post_before_ready_is_503_with_retry_after(
+    serve: Serve, monkeypatch: pytest.MonkeyPatch, tiny: dict
+) -> None:
+    release = threading.Event()
+    real_warm_up = runtime_module.warm_up
+
+    def slow_warm_up(runtime: Runtime) -> None:
+        release.wait(WAIT_S)
+        real_warm_up(runtime)
+
+    monkeypatch.setattr(main_module, "warm_up", slow_warm_up)
+    async with serve(Settings(retry_after_s=2), ready=False) as client:
+        try:
+            response = await post_json(client, tiny)
+        finally:
+            release.set()
+        await wait_ready(client)
+        assert (await post_json(client, tiny)).status_code == 200
+    assert response.status_code == 503 and response.headers["retry-after"] == "2"
+    assert "not ready yet (warming up)" in response.json()["detail"]

@@ -86,7 +86,14 @@ async def test_metrics_count_requests_solves_sizes_and_rejections(
     rejected = {
         r: value(samples, "scheduler_rejected_requests_total", reason=r) for r in REJECT_REASONS
     }
-    assert rejected == {"validation": 1, "too_large": 2, "problem_rule": 1, "internal": 1}
+    assert rejected == {
+        "validation": 1,
+        "too_large": 2,
+        "problem_rule": 1,
+        "internal": 1,
+        "saturated": 0,
+        "not_ready": 0,
+    }
 
 
 async def test_each_app_has_its_own_registry(serve: Serve, tiny: dict[str, Any]) -> None:

@@ -68,3 +68,23 @@ def test_python_m_service_serves_the_tiny_request(server: str) -> None:
         assert response.status_code == 200, response.text
         assert_valid_answer(request, response.json())
         assert 'route="/v1/schedules"' in client.get("/metrics").text
+        traced = client.post("/v1/schedules", json=request, headers={"X-Request-ID": "trace-1"})
+        assert traced.headers["x-request-id"] == "trace-1"
+
+
+def test_every_log_line_is_json_with_one_line_per_request(server: str, tmp_path: Path) -> None:
+    with httpx.Client(base_url=server, timeout=30.0) as client:
+        wait_ready(client)
+        request = json.loads(TINY.read_text())
+        client.post("/v1/schedules", json=request, headers={"X-Request-ID": "trace-2"})
+        client.post("/v1/schedules", json={"robots": []})
+    time.sleep(0.5)  # the line is written once the response is sent
+    lines = [json.loads(line) for line in (tmp_path / "server.log").read_text().splitlines()]
+    access = [line for line in lines if line["logger"] == "service.access"]
+    solved, refused = access
+    assert solved["request_id"] == "trace-2" and solved["status"] == 200
+    assert (solved["robots"], solved["nodes"], solved["conflicts"]) == (3, 5, 3)
+    assert solved["solver"] == "auto" and solved["answered_by"] == "exact"
+    assert solved["queue_s"] >= 0 and solved["solve_s"] > 0 and solved["outcome"] == "optimal"
+    assert refused["status"] == 422 and refused["outcome"] == "validation"
+    assert len(refused["request_id"]) == 32  # generated

@@ -1,10 +1,15 @@
-"""Settings: environment variables, validation, and the dispatch policy built from them."""
+"""Settings: environment variables, validation, and the policy and runtime built from them."""
 
 from __future__ import annotations
+
+import os
+import subprocess
+import sys
 
 import pytest
 from pydantic import ValidationError
 
+from service.api.runtime import build_runtime, dispatch_policy
 from service.settings import MIB, Settings, get_settings
 from service.solvers.dispatch import DispatchPolicy
 
@@ -36,6 +41,10 @@ def test_environment_overrides(monkeypatch: pytest.MonkeyPatch) -> None:
         ("max_body_bytes", 0),
         ("exact_workers", 0),
         ("solve_concurrency", 0),
+        ("queue_size", -1),
+        ("retry_after_s", 0),
+        ("torch_threads", 0),
+        ("max_clique_incidences", 0),
         ("large_solver", "auto"),
         ("log_level", "loud"),
     ],
@@ -49,9 +58,26 @@ def test_dispatch_policy_follows_settings() -> None:
     s = Settings(
         default_time_limit_s=2.5, exact_max_conflicts=10, large_solver="fcfs", exact_workers=4
     )
-    assert s.dispatch_policy() == DispatchPolicy(
+    assert dispatch_policy(s) == DispatchPolicy(
         default_time_limit_s=2.5, exact_max_conflicts=10, large_solver="fcfs", exact_workers=4
     )
+
+
+def test_reading_settings_imports_nothing_heavy() -> None:
+    heavy = "{'torch', 'ortools', 'numba', 'networkx'}"
+    code = f"import sys, service.settings; print(sorted({heavy} & set(sys.modules)))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
+
+
+def test_runtime_follows_settings() -> None:
+    s = Settings(solve_concurrency=3, queue_size=5, retry_after_s=7, max_clique_incidences=99)
+    runtime = build_runtime(s)
+    pool = runtime.limiter
+    assert (pool.queue_size, pool.retry_after_s, pool.max_clique_incidences) == (5, 7, 99)
+    assert pool.slots.total_tokens == 3
+    assert runtime.torch_threads == max(1, (os.cpu_count() or 1) // 3)
+    assert build_runtime(Settings(torch_threads=5)).torch_threads == 5
 
 
 def test_get_settings_is_cached() -> None:

@@ -5,16 +5,15 @@ from __future__ import annotations
 from functools import partial
 from typing import Annotated
 
-from anyio import to_thread
 from fastapi import APIRouter
 from pydantic import Discriminator, Tag
 
 from service.api.body_limit import BodyLimitRoute
-from service.api.deps import MetricsDep, RuntimeDep, SettingsDep
-from service.api.errors import InvalidProblem, TooLarge
+from service.api.deps import MetricsDep, ReadyRuntimeDep, RecordDep, RuntimeDep, SettingsDep
+from service.api.errors import TooLarge
 from service.api.paths import check_path_caps, geometry_settings, run_paths_work
+from service.api.request_log import RequestRecord
 from service.core.path_schemas import PathsRequest, PathsScheduleResponse, request_form
-from service.core.problem import ProblemError
 from service.core.schemas import ScheduleRequest, ScheduleResponse
 from service.motion.plan import plan_paths
 from service.settings import Settings
@@ -44,7 +43,11 @@ ERROR_RESPONSES = {
     responses=ERROR_RESPONSES,
 )
 async def create_schedule(
-    body: ScheduleBody, settings: SettingsDep, runtime: RuntimeDep, metrics: MetricsDep
+    body: ScheduleBody,
+    settings: SettingsDep,
+    runtime: ReadyRuntimeDep,
+    metrics: MetricsDep,
+    record: RecordDep,
 ) -> ScheduleResponse | PathsScheduleResponse:
     """Schedule the conflicts of ``body``: who passes first, and how, at least cost.
 
@@ -55,13 +58,14 @@ async def create_schedule(
     """
     if isinstance(body, PathsRequest):
         return await schedule_paths(body, settings, runtime, metrics)
+    note_problem(record, body)
     check_caps(body, settings)
     metrics.observe_problem(len(body.robots), len(body.conflicts))
-    try:
-        response = await to_thread.run_sync(dispatch, body, runtime.policy, limiter=runtime.limiter)
-    except ProblemError as exc:
-        raise InvalidProblem.from_problem_error(exc) from exc
+    time_limit_s = body.options.time_limit_s or runtime.policy.default_time_limit_s
+    solve = partial(dispatch, body, runtime.policy, deadline=record.arrival + time_limit_s)
+    response = await runtime.limiter.run(solve, record)
     metrics.observe_solve(response)
+    note_answer(record, response)
     return response
 
 
@@ -75,6 +79,25 @@ async def schedule_paths(
     metrics.observe_problem(len(body.robots), len(response.assignment))
     metrics.observe_solve(response)
     return response
+
+
+def note_problem(record: RequestRecord, body: ScheduleRequest) -> None:
+    """Add the problem's sizes and the solver asked for to the request's log line."""
+    record.fields.update(
+        robots=len(body.robots),
+        nodes=sum(len(r.nodes) for r in body.robots),
+        conflicts=len(body.conflicts),
+        solver=body.options.solver,
+    )
+
+
+def note_answer(record: RequestRecord, response: ScheduleResponse) -> None:
+    """Add the solver that answered, and how, to the request's log line."""
+    record.fields.update(
+        answered_by=response.solver.name,
+        fallback_from=response.solver.fallback_from,
+        outcome="optimal" if response.solver.optimal else "feasible",
+    )
 
 
 def check_caps(request: ScheduleRequest, settings: Settings) -> None:
