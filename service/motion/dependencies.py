@@ -49,7 +49,7 @@ def staircase(until: np.ndarray, wait: np.ndarray) -> tuple[np.ndarray, np.ndarr
     robot is before ``u`` is the least ``wait`` over constraints with ``until > u``:
     a non-decreasing step function; one constraint per step is kept.
     """
-    order = np.argsort(until, kind="stable")
+    order = np.lexsort((-wait, until))  # ties: the least wait last, so only it is kept
     until, wait = until[order], wait[order]
     least = np.minimum.accumulate(wait[::-1])[::-1]  # (K,) least wait from k on
     keep = np.ones(until.size, dtype=bool)

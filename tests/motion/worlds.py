@@ -17,6 +17,7 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+import pytest
 from hypothesis import strategies as st
 
 from service.core.assignment import Assignments
@@ -28,7 +29,7 @@ from service.geometry.paths import RobotPath
 from service.motion.plan import plan_paths
 from service.simulation.clearance import Trajectory
 from service.solvers.dispatch import DispatchPolicy
-from tests.motion.reference_clearance import reference_clearance
+from tests.motion.reference_clearance import position, reference_clearance
 
 __all__ = [
     "ON_PATH_TOL",
@@ -36,7 +37,7 @@ __all__ = [
     "SPEED_TOL",
     "assert_motion_valid",
     "distance_to_path",
-    "evaluated_completion",
+    "evaluated",
     "fleets",
     "path_arcs",
     "paths_of",
@@ -186,11 +187,36 @@ def assert_motion_valid(req: PathsRequest, out: PathsScheduleResponse) -> None:
         arcs = path_arcs(path, tr.xy)
         assert abs(arcs[-1] - path.length) < 1e-5
         _assert_speeds(path, tr.t, arcs)
+    _assert_schedule_describes_trajectories(req, out, trajs)
 
 
-def evaluated_completion(out: PathsScheduleResponse) -> dict[str, float]:
-    """Per robot of the answer's graph, its completion as the dispatcher's evaluator computes
-    it for the answer's own assignment (the graph-form view of the same decision)."""
+def _assert_schedule_describes_trajectories(
+    req: PathsRequest, out: PathsScheduleResponse, trajs: list[Trajectory]
+) -> None:
+    """Node times are when the trajectory leaves the node's ends; costs are of completions."""
+    paths = {p.id: p for p in paths_of(req)}
+    by_id = {r.id: tr for r, tr in zip(req.robots, trajs, strict=True)}
+    for entry in out.schedule:
+        path, tr = paths[entry.robot], by_id[entry.robot]
+        assert entry.delay == pytest.approx(entry.completion - path.finish_time, abs=1e-9)
+        for node in entry.nodes:
+            s_enter, s_exit = out.node_spans[node.id]
+            assert tr.t[0] - 1e-9 <= node.enter <= node.exit <= tr.t[-1] + 1e-9
+            for t, s in ((node.enter, s_enter), (node.exit, s_exit)):
+                np.testing.assert_allclose(position(tr, t), path.position_at(s), atol=1e-6)
+    completion = np.array([s.completion for s in out.schedule])
+    mean = float(completion.mean())
+    assert out.costs.avg_completion == pytest.approx(mean)
+    assert out.costs.max_completion == pytest.approx(float(completion.max()))
+    sync = mean + float(np.abs(completion - mean).mean())
+    assert out.costs.sync_completion == pytest.approx(sync)
+    assert out.costs.avg_delay >= -1e-9
+    assert out.cost == getattr(out.costs, out.objective)
+
+
+def evaluated(out: PathsScheduleResponse) -> tuple[dict[str, float], dict[str, float]]:
+    """The dispatcher evaluator's view of the answer's own assignment on its graph: per
+    robot of the graph its completion, and the four costs."""
     assert out.graph is not None
     a_first = np.array(
         [a.from_ == c.a for a, c in zip(out.assignment, out.graph.conflicts, strict=True)]
@@ -199,7 +225,8 @@ def evaluated_completion(out: PathsScheduleResponse) -> dict[str, float]:
     problem = problem_from_request(out.graph)
     evaluation = Evaluator(problem).evaluate(Assignments.single(a_first, following))
     completion = evaluation.completion[0].tolist()
-    return {r.id: c for r, c in zip(out.graph.robots, completion, strict=True)}
+    costs = {k: float(v[0]) for k, v in evaluation.costs.items()}
+    return {r.id: c for r, c in zip(out.graph.robots, completion, strict=True)}, costs
 
 
 @st.composite
