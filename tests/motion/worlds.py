@@ -27,9 +27,9 @@ from service.core.problem import problem_from_request
 from service.geometry.graph import GeometrySettings
 from service.geometry.paths import RobotPath
 from service.motion.plan import plan_paths
-from service.simulation.clearance import Trajectory
+from service.simulation.clearance import Trajectory, check_clearance
 from service.solvers.dispatch import DispatchPolicy
-from tests.motion.reference_clearance import position, reference_clearance
+from tests.motion.reference_clearance import ReferenceClearance, position, reference_clearance
 
 __all__ = [
     "ON_PATH_TOL",
@@ -175,6 +175,7 @@ def assert_motion_valid(req: PathsRequest, out: PathsScheduleResponse) -> None:
     trajs = wire_trajectories(req, out)
     ref = reference_clearance(trajs)
     assert not ref.overlapping(-OVERLAP_TOL), f"overlaps: {ref.pair_gap}"
+    _assert_clearance_agrees(out, trajs, ref)
     completion = {s.robot: s.completion for s in out.schedule}
     assert set(completion) == {r.id for r in req.robots}
     for path, tr in zip(paths_of(req), trajs, strict=True):
@@ -188,6 +189,25 @@ def assert_motion_valid(req: PathsRequest, out: PathsScheduleResponse) -> None:
         assert abs(arcs[-1] - path.length) < 1e-5
         _assert_speeds(path, tr.t, arcs)
     _assert_schedule_describes_trajectories(req, out, trajs)
+
+
+def _assert_clearance_agrees(
+    out: PathsScheduleResponse, trajs: list[Trajectory], ref: ReferenceClearance
+) -> None:
+    """The answer's least clearance is the clearance check's, and the reference confirms it:
+    at the reported time the pair is that far apart, and never less at any sample."""
+    check = check_clearance(trajs)
+    assert check.ok
+    assert out.checks.min_clearance_m == check.min_gap
+    if check.min_gap is None:
+        assert ref.min_gap is None or ref.min_gap > 0
+        return
+    assert check.pair is not None and check.time is not None
+    i, j = check.pair
+    a, b = trajs[i], trajs[j]
+    at = float(np.linalg.norm(position(a, check.time) - position(b, check.time)))
+    assert at - a.radius - b.radius == pytest.approx(check.min_gap, abs=1e-6)
+    assert check.min_gap <= ref.pair_gap[check.pair] + 1e-9
 
 
 def _assert_schedule_describes_trajectories(
