@@ -26,6 +26,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 import networkx as nx
 import numpy as np
@@ -93,11 +94,16 @@ class CoordinationGraph:
 
     def node_ids(self) -> list[str]:
         """``{robot id}/{k}``: the k-th node of the robot (injective: k has no '/')."""
-        ids = []
-        for v, r in enumerate(self.node_robot.tolist()):
-            k = v - int(np.searchsorted(self.node_robot, r))
-            ids.append(f"{self.paths[r].id}/{k}")
-        return ids
+        return list(self._node_ids)
+
+    @cached_property
+    def _node_ids(self) -> tuple[str, ...]:
+        first = np.searchsorted(self.node_robot, self.node_robot)  # (V,) robot's first node
+        rank = np.arange(self.node_robot.size) - first
+        return tuple(
+            f"{self.paths[r].id}/{k}"
+            for r, k in zip(self.node_robot.tolist(), rank.tolist(), strict=True)
+        )
 
     def robots_in_graph(self) -> np.ndarray:
         """(R',) int: robots with at least one node, in request order."""

@@ -210,14 +210,23 @@ def _render(
 
 def _time_points(graph: CoordinationGraph) -> list[np.ndarray]:
     """Per robot (P_r,) its planned time points (contract): node and pair ends, goal."""
-    arcs: list[list[np.ndarray]] = [[np.array([p.length])] for p in graph.paths]
-    for v, r in enumerate(graph.node_robot.tolist()):
-        arcs[r].append(graph.node_span[v])
-    for m in range(graph.n_conflicts):
-        i, j = graph.node_robot[graph.conf_node[m]].tolist()
-        arcs[i].append(graph.conf_span[m, :2])
-        arcs[j].append(graph.conf_span[m, 2:])
-    return [np.unique(p.time_at(np.concatenate(a))) for p, a in zip(graph.paths, arcs, strict=True)]
+    robot = graph.node_robot[graph.conf_node]  # (M, 2)
+    owner = np.concatenate(
+        [np.arange(len(graph.paths)), np.repeat(graph.node_robot, 2), np.repeat(robot.ravel(), 2)]
+    )
+    arc = np.concatenate(
+        [
+            [p.length for p in graph.paths],
+            graph.node_span.ravel(),
+            graph.conf_span.ravel(),  # x0 x1 on side a, y0 y1 on side b
+        ]
+    )
+    order = np.argsort(owner, kind="stable")
+    bounds = np.searchsorted(owner[order], np.arange(len(graph.paths) + 1))
+    return [
+        np.unique(p.time_at(arc[order[bounds[r] : bounds[r + 1]]]))
+        for r, p in enumerate(graph.paths)
+    ]
 
 
 def _assignment(graph: CoordinationGraph, decision: Decision) -> list[AssignmentOut]:

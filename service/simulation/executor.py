@@ -67,34 +67,36 @@ class _Executor:
     """State of one run; :func:`execute` is the public entry."""
 
     def __init__(self, paths: Sequence[RobotPath], plan: DependencyPlan, rates: Sequence[Rate]):
+        # State lives in Python lists: the event loop reads single entries, where numpy
+        # scalar indexing measured several times slower.
         self.paths, self.plan, self.rates = paths, plan, rates
         n = len(paths)
-        self.clock = np.array([p.start_time for p in paths])  # progress clock at self.wall
-        self.wall = self.clock.copy()
-        self.moving = np.zeros(n, dtype=bool)
-        self.started = np.zeros(n, dtype=bool)
-        self.done = np.zeros(n, dtype=bool)
-        self.version = np.zeros(n, dtype=np.int64)
-        self.target = self.clock.copy()  # progress clock of each moving robot's next event
+        self.finish = [p.finish_time for p in paths]
+        self.clock = [p.start_time for p in paths]  # progress clock at self.wall
+        self.wall = list(self.clock)
+        self.moving = [False] * n
+        self.started = [False] * n
+        self.done = [False] * n
+        self.version = [0] * n
+        self.target = list(self.clock)  # progress clock of each moving robot's next event
         self.records: list[list[tuple[float, float]]] = [[] for _ in range(n)]
-        self.completion = np.full(n, np.nan)
-        self.satisfied = np.zeros(plan.size, dtype=bool)
-        # Per waiter, a heap of (wait_s, constraint); its limit is the least unsatisfied one.
+        self.completion = [float("nan")] * n
+        self.satisfied = [False] * plan.size
+        self.waiter = plan.waiter.tolist()
+        wait_clock = _on_clock(paths, plan.waiter, plan.wait_s)  # (D,)
+        until_clock = _on_clock(paths, plan.waitee, plan.until_s)  # (D,)
+        # Per waiter, a heap of (wait clock, constraint); its limit is the least unsatisfied.
         self.blocking: list[list[tuple[float, int]]] = [[] for _ in range(n)]
-        for c in range(plan.size):
-            self.blocking[plan.waiter[c]].append((float(plan.wait_s[c]), c))
+        for c, (w, clock) in enumerate(zip(plan.waiter.tolist(), wait_clock.tolist(), strict=True)):
+            self.blocking[w].append((clock, c))
         for heap in self.blocking:
             heapq.heapify(heap)
         # Per waitee, its release thresholds as progress-clock values, sorted.
-        until_clock = np.empty(plan.size)
-        for r in range(n):
-            mine = plan.waitee == r
-            until_clock[mine] = paths[r].time_at(plan.until_s[mine])
         order = np.lexsort((until_clock, plan.waitee))
-        self.release_order = order
-        self.release_clock = until_clock[order]
-        self.release_start = np.searchsorted(plan.waitee[order], np.arange(n + 1))
-        self.next_release = self.release_start[:-1].copy()
+        self.release_order = order.tolist()
+        self.release_clock = until_clock[order].tolist()
+        self.release_start = np.searchsorted(plan.waitee[order], np.arange(n + 1)).tolist()
+        self.next_release = self.release_start[:-1]
         self.events: list[tuple[float, int, int, int, float]] = []
         self.seq = 0
 
@@ -118,8 +120,7 @@ class _Executor:
         heap = self.blocking[r]
         while heap and self.satisfied[heap[0][1]]:
             heapq.heappop(heap)
-        path = self.paths[r]
-        return float(path.time_at(heap[0][0])) if heap else path.finish_time
+        return heap[0][0] if heap else self.finish[r]
 
     def _schedule(self, r: int) -> None:
         """Robot r moves from (wall, clock): push its next event, or stop it at its limit."""
@@ -132,7 +133,7 @@ class _Executor:
         if not self.moving[r]:
             self.moving[r] = True
             self._record(r)
-        target = min(limit, self.paths[r].finish_time)
+        target = min(limit, self.finish[r])
         k = self.next_release[r]
         if k < self.release_start[r + 1]:
             target = min(target, self.release_clock[k])
@@ -151,7 +152,7 @@ class _Executor:
     def _arrive(self, r: int, wall: float, clock: float) -> None:
         """Robot r reached progress ``clock`` at ``wall``: release, finish or go on."""
         self.wall[r], self.clock[r] = wall, clock
-        if clock >= self.paths[r].finish_time:
+        if clock >= self.finish[r]:
             self.done[r], self.moving[r] = True, False
             self.completion[r] = wall
             self._record(r)
@@ -166,7 +167,7 @@ class _Executor:
         while k < end and (self.done[r] or self.release_clock[k] <= self.clock[r]):
             c = self.release_order[k]
             self.satisfied[c] = True
-            waiters.add(int(self.plan.waiter[c]))
+            waiters.add(self.waiter[c])
             k += 1
         self.next_release[r] = k
         for w in sorted(waiters):
@@ -191,8 +192,19 @@ class _Executor:
             wall, clock = _expand(self.records[r], path, self.rates[r])
             walls.append(wall)
             clocks.append(clock)
-        stuck = tuple(int(r) for r in np.flatnonzero(~self.done))
-        return Run(walls, clocks, self.completion, stuck)
+        stuck = tuple(r for r, done in enumerate(self.done) if not done)
+        return Run(walls, clocks, np.array(self.completion), stuck)
+
+
+def _on_clock(paths: Sequence[RobotPath], robot: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """(D,) planned progress clock of each robot[d] at arc length s[d]."""
+    out = np.empty(s.size)
+    order = np.argsort(robot, kind="stable")
+    bounds = np.searchsorted(robot[order], np.arange(len(paths) + 1))
+    for r, path in enumerate(paths):
+        rows = order[bounds[r] : bounds[r + 1]]
+        out[rows] = path.time_at(s[rows])
+    return out
 
 
 def _expand(

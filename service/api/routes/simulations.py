@@ -34,7 +34,7 @@ async def create_simulation(
     """
     check_path_caps(body.robots, settings)
     waypoints = sum(len(t.points) for t in body.trajectories or ())
-    waits = sum(len(w.after) for d in body.dependencies or () for w in d.waits)
+    waits = sum(len(w["after"]) for d in body.dependencies or () for w in d["waits"])
     items = max(waypoints, waits, len(body.disturbances))
     if items > settings.max_total_path_points:
         raise TooLarge(
