@@ -21,6 +21,8 @@ from service.geometry.graph import GeometrySettings, build_graph
 from service.geometry.paths import RobotPath
 from service.motion.dependencies import Decision, dependency_plan
 from service.motion.trajectories import trajectories
+from service.simulation.clearance import check_clearance
+from service.simulation.disturbances import Rate
 from service.simulation.executor import Run, execute
 from service.solvers.dispatch import DispatchPolicy, dispatch
 from tests.motion.reference_clearance import position, reference_clearance
@@ -281,3 +283,37 @@ def test_no_interference_at_all() -> None:
     assert_motion_valid(req, out)
     assert out.graph is None and out.assignment == [] and out.solver.name == "none"
     assert _completions(out) == {"a": 1.0, "b": 2.0}
+
+
+def _decision_of(req: PathsRequest, out: PathsScheduleResponse) -> Decision:
+    """The answer's assignment as a decision on the request's graph (conflict order)."""
+    graph = build_graph(paths_of(req), GeometrySettings())
+    ids = graph.node_ids()
+    a_first = np.array(
+        [ids[a] == x.from_ for x, a in zip(out.assignment, graph.conf_node[:, 0], strict=True)],
+        dtype=bool,
+    )
+    following = np.array([x.type == "following" for x in out.assignment], dtype=bool)
+    return Decision(a_first, following)
+
+
+@settings(max_examples=15, deadline=None, derandomize=True)
+@given(robots=fleets(max_robots=6, side=10.0), data=st.data())
+def test_plans_stay_safe_when_robots_run_late(robots: Fleet, data: st.DataObject) -> None:
+    """The answer's dependency plan executed with late starts, stops and slow-downs: no
+    deadlock, no overlap (the dependencies, not the timing, keep robots apart)."""
+    req = request(robots, solver="fcfs")
+    try:
+        out = plan(req)
+    except ProblemError:
+        return
+    graph = build_graph(paths_of(req), GeometrySettings())
+    piece = st.tuples(st.floats(0.0, 20.0), st.floats(0.1, 6.0), st.sampled_from([0.0, 0.3, 0.7]))
+    rates = [Rate.of(data.draw(st.lists(piece, max_size=3))) for _ in robots]
+    run = execute(graph.paths, dependency_plan(graph, _decision_of(req, out)), rates)
+    assert run.deadlocked == ()
+    trajs = trajectories(graph.paths, run)
+    assert not reference_clearance(trajs).overlapping(-OVERLAP_TOL)
+    assert check_clearance(trajs).ok
+    late = np.array([s.completion for s in out.schedule])
+    assert np.all(run.completion >= late - 1e-9), "a disturbance never makes a robot earlier"
