@@ -83,6 +83,22 @@ def merge_diverge() -> Fleet:
     ]
 
 
+def issue_example() -> Fleet:
+    """The request of issue 10: one robot with speed and start time, one with times."""
+    return [
+        robot("amr-001", [[1.5, 0.5], [1.5, 7.5], [9.5, 7.5]], speed=1.0, start_time=3.25),
+        robot("amr-002", [[0.0, 3.0], [4.0, 3.0], [12.0, 3.0]], times=[0.0, 8.0, 12.0]),
+    ]
+
+
+def out_and_back() -> Fleet:
+    """A robot driving an aisle out and back while another crosses it twice (a zigzag)."""
+    return [
+        robot("aisle", [[0, 0], [10, 0], [0, 0.1]], speed=1.5),
+        robot("zigzag", [[3, -4], [3, 4], [7, 4], [7, -4]], start_time=1.0),
+    ]
+
+
 SCENARIOS: dict[str, Callable[[], Fleet]] = {
     f.__name__: f
     for f in (
@@ -94,5 +110,7 @@ SCENARIOS: dict[str, Callable[[], Fleet]] = {
         intersection,
         three_way,
         merge_diverge,
+        issue_example,
+        out_and_back,
     )
 }
