@@ -94,7 +94,7 @@ def _assert_exclusive_matches(out: PathsScheduleResponse, *, equal: bool) -> Non
 
 @pytest.mark.parametrize("solver", PROPERTY_SOLVERS)
 @settings(
-    max_examples=10,
+    max_examples=15,
     deadline=None,
     derandomize=True,
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.large_base_example],
@@ -127,7 +127,7 @@ def _execute(req: PathsRequest, a_first: np.ndarray, following: np.ndarray) -> t
     return run, trajectories(graph.paths, run)
 
 
-@settings(max_examples=30, deadline=None, derandomize=True)
+@settings(max_examples=40, deadline=None, derandomize=True)
 @given(robots=fleets(max_robots=6, side=10.0), seed=st.integers(0, 999), data=st.data())
 def test_any_acyclic_directions_with_any_types_execute_safely(
     robots: Fleet, seed: int, data: st.DataObject
@@ -297,7 +297,7 @@ def _decision_of(req: PathsRequest, out: PathsScheduleResponse) -> Decision:
     return Decision(a_first, following)
 
 
-@settings(max_examples=15, deadline=None, derandomize=True)
+@settings(max_examples=25, deadline=None, derandomize=True)
 @given(robots=fleets(max_robots=6, side=10.0), data=st.data())
 def test_plans_stay_safe_when_robots_run_late(robots: Fleet, data: st.DataObject) -> None:
     """The answer's dependency plan executed with late starts, stops and slow-downs: no
