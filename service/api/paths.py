@@ -6,6 +6,7 @@ from collections.abc import Callable, Sequence
 from typing import TypeVar
 
 from service.api.errors import TooLarge
+from service.api.request_log import RequestRecord
 from service.api.runtime import SolvePool
 from service.core.path_schemas import PathRobotIn
 from service.geometry.graph import GeometrySettings
@@ -45,9 +46,11 @@ def check_path_caps(robots: Sequence[PathRobotIn], settings: Settings) -> None:
         raise TooLarge("problem too large: " + "; ".join(over))
 
 
-async def run_paths_work(work: Callable[[], T], limiter: SolvePool) -> T:
+async def run_paths_work(
+    work: Callable[[], T], limiter: SolvePool, record: RequestRecord | None = None
+) -> T:
     """Run blocking paths-form work in the solve pool, mapping its errors to API errors."""
     try:
-        return await limiter.run(work)
+        return await limiter.run(work, record)
     except TooComplex as exc:
         raise TooLarge(str(exc)) from exc

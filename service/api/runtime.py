@@ -15,13 +15,17 @@ from anyio import CapacityLimiter, WouldBlock, to_thread
 from service.api.errors import InvalidProblem, Saturated, TooLarge
 from service.api.request_log import RequestRecord
 from service.core.cliques import TooManyCliques, clique_budget
+from service.core.path_schemas import PathsRequest
 from service.core.problem import ProblemError
 from service.core.schemas import OBJECTIVES, OptionsIn, ScheduleRequest
+from service.geometry.graph import GeometrySettings
+from service.motion.plan import plan_paths
 from service.settings import Settings
 from service.solvers.dispatch import LAST_RESORT, DispatchPolicy, dispatch
 from service.solvers.registry import solver_names
 
 __all__ = [
+    "PATHS_WARMUP_REQUEST",
     "WARMUP_REQUEST",
     "Runtime",
     "SolvePool",
@@ -45,6 +49,17 @@ WARMUP_REQUEST = ScheduleRequest.model_validate(
             {"id": "b", "nodes": [{"id": "b0", "enter": 1.0, "exit": 3.0, "density": 2}]},
         ],
         "conflicts": [{"a": "a0", "b": "b0", "a_enter": 0.5, "a_exit": 1.5}],
+        "options": {"solver": "exact", "time_limit_s": 10.0},
+    }
+)
+# Warms the paths form up the same way: a crossing (exclusive) and a same-way pair.
+PATHS_WARMUP_REQUEST = PathsRequest.model_validate(
+    {
+        "robots": [
+            {"id": "a", "path": [[0.0, 0.0], [6.0, 0.0]], "radius": 0.4, "speed": 1.0},
+            {"id": "b", "path": [[3.0, -3.0], [3.0, 3.0]], "radius": 0.4, "speed": 1.0},
+            {"id": "c", "path": [[-2.0, 0.0], [6.0, 0.0]], "radius": 0.4, "speed": 2.0},
+        ],
         "options": {"solver": "exact", "time_limit_s": 10.0},
     }
 )
@@ -215,6 +230,8 @@ def warm_up(runtime: Runtime) -> None:
         # The large-problem path too (the GNN-VAE, the ES and tabu's kernels), or its fallback.
         large = OptionsIn(solver=runtime.policy.large_solver, samples=2, time_limit_s=10.0)
         dispatch(WARMUP_REQUEST.model_copy(update={"options": large}), runtime.policy)
+        # The paths form: geometry, dependency plan, executor and clearance kernels.
+        plan_paths(PATHS_WARMUP_REQUEST, runtime.policy, GeometrySettings())
     except Exception as exc:
         runtime.detail = f"warm-up failed: {type(exc).__name__}: {exc}"
         log.exception("not ready: warm-up failed")

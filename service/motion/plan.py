@@ -86,24 +86,35 @@ def coordination_graph(
 
 
 def plan_paths(
-    request: PathsRequest, policy: DispatchPolicy, geometry: GeometrySettings
+    request: PathsRequest,
+    policy: DispatchPolicy,
+    geometry: GeometrySettings,
+    *,
+    deadline: float | None = None,
 ) -> PathsScheduleResponse:
     """Schedule ``request`` and return trajectories that never collide.
 
+    Args:
+        deadline: ``time.monotonic()`` by which the answer is due (the request's arrival
+            plus its time limit); default: the time limit from now. The solve gets what
+            is left of it after the geometry, less MOTION_SHARE of the time limit kept
+            for execution and the clearance check.
+
     Raises:
         ProblemError: bad geometry (fixed paths leave no collision-free order).
+        TooComplex: the paths interfere in more places than the work bound allows.
         InvalidAnswerError: not even the all-exclusive plan executed cleanly (a bug).
     """
     start = time.perf_counter()
+    limit = request.options.time_limit_s or policy.default_time_limit_s
+    due = time.monotonic() + limit if deadline is None else deadline
     graph = derive(request, geometry)
     graph_request = graph.to_request(request)
     graph_done = time.perf_counter()
-    limit = request.options.time_limit_s or policy.default_time_limit_s
     answer: ScheduleResponse | None = None
     if graph_request is not None:
-        left = limit * (1.0 - MOTION_SHARE) - (graph_done - start)
-        options = graph_request.options.model_copy(update={"time_limit_s": max(MIN_SOLVE_S, left)})
-        answer = dispatch(graph_request.model_copy(update={"options": options}), policy)
+        solve_due = max(due - MOTION_SHARE * limit, time.monotonic() + MIN_SOLVE_S)
+        answer = dispatch(graph_request, policy, deadline=solve_due)
     solve_done = time.perf_counter()
     executed = _execute_safely(graph, _decision(graph, answer))
     timings = TimingsOut(

@@ -9,10 +9,12 @@ from fastapi import APIRouter
 from pydantic import Discriminator, Tag
 
 from service.api.body_limit import BodyLimitRoute
-from service.api.deps import MetricsDep, ReadyRuntimeDep, RecordDep, RuntimeDep, SettingsDep
+from service.api.deps import MetricsDep, ReadyRuntimeDep, RecordDep, SettingsDep
 from service.api.errors import TooLarge
+from service.api.metrics import Metrics
 from service.api.paths import check_path_caps, geometry_settings, run_paths_work
 from service.api.request_log import RequestRecord
+from service.api.runtime import Runtime
 from service.core.path_schemas import PathsRequest, PathsScheduleResponse, request_form
 from service.core.schemas import ScheduleRequest, ScheduleResponse
 from service.motion.plan import plan_paths
@@ -57,7 +59,7 @@ async def create_schedule(
     service has executed and checked for clearance (docs/paths.md).
     """
     if isinstance(body, PathsRequest):
-        return await schedule_paths(body, settings, runtime, metrics)
+        return await schedule_paths(body, settings, runtime, metrics, record)
     note_problem(record, body)
     check_caps(body, settings)
     metrics.observe_problem(len(body.robots), len(body.conflicts))
@@ -70,14 +72,31 @@ async def create_schedule(
 
 
 async def schedule_paths(
-    body: PathsRequest, settings: Settings, runtime: RuntimeDep, metrics: MetricsDep
+    body: PathsRequest,
+    settings: Settings,
+    runtime: Runtime,
+    metrics: Metrics,
+    record: RequestRecord,
 ) -> PathsScheduleResponse:
     """The paths form: derive the graph, solve it, execute and check the trajectories."""
+    record.fields.update(
+        robots=len(body.robots),
+        path_points=sum(len(r.path) for r in body.robots),
+        solver=body.options.solver,
+    )
     check_path_caps(body.robots, settings)
-    work = partial(plan_paths, body, runtime.policy, geometry_settings(settings))
-    response = await run_paths_work(work, runtime.limiter)
+    time_limit_s = body.options.time_limit_s or runtime.policy.default_time_limit_s
+    work = partial(
+        plan_paths,
+        body,
+        runtime.policy,
+        geometry_settings(settings),
+        deadline=record.arrival + time_limit_s,
+    )
+    response = await run_paths_work(work, runtime.limiter, record)
     metrics.observe_problem(len(body.robots), len(response.assignment))
     metrics.observe_solve(response)
+    note_answer(record, response)
     return response
 
 
