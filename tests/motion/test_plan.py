@@ -173,6 +173,30 @@ def test_scenario_moves_without_collision(name: str, solver: str) -> None:
         _assert_exclusive_matches(out, equal=True)
 
 
+def _shifted(fleet: Fleet, offset: float) -> Fleet:
+    """The fleet with every planned time later by ``offset`` seconds."""
+    out = []
+    for r in fleet:
+        r = dict(r)
+        if "times" in r:
+            r["times"] = [t + offset for t in r["times"]]
+        else:
+            r["start_time"] = r.get("start_time", 0.0) + offset
+        out.append(r)
+    return out
+
+
+@pytest.mark.parametrize("name", sorted(SCENARIOS))
+def test_scenario_far_from_time_zero(name: str) -> None:
+    """Times of order 1e6 s (a fleet's clock since its start): rounding stays far below
+    the margin, and exclusive plans still equal the evaluator."""
+    req = request(_shifted(SCENARIOS[name](), 1e6), solver="fcfs")
+    out = plan(req)
+    assert_motion_valid(req, out)
+    if all(a.type == "exclusive" for a in out.assignment):
+        _assert_exclusive_matches(out, equal=True)
+
+
 def _xs(req: PathsRequest, out: PathsScheduleResponse, times: np.ndarray) -> np.ndarray:
     """(R, T) x coordinate of every robot at ``times`` (NaN where it is not present)."""
     rows = []
