@@ -53,6 +53,9 @@ OVERLAP_TOL = 1e-3
 # Waypoints are interpolated from times; they lie on the path up to rounding.
 ON_PATH_TOL = 1e-6
 SPEED_TOL = 1e-6
+# What an answer's solver detail says when the solver's plan failed to execute cleanly and
+# was replaced by its all-exclusive version: a dependency plan that deadlocked or collided.
+FALLBACK_DETAIL = "executed with every conflict exclusive"
 
 
 def robot(
@@ -172,6 +175,7 @@ def assert_motion_valid(req: PathsRequest, out: PathsScheduleResponse) -> None:
     """The acceptance property of one answer, checked from the wire answer alone."""
     assert out.checks.collision_free
     assert out.checks.acyclic and out.checks.density and out.checks.forced
+    assert out.solver.detail != FALLBACK_DETAIL, "the solver's own plan did not execute"
     trajs = wire_trajectories(req, out)
     ref = reference_clearance(trajs)
     assert not ref.overlapping(-OVERLAP_TOL), f"overlaps: {ref.pair_gap}"
