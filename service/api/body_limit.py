@@ -14,10 +14,11 @@ from collections.abc import Awaitable, Callable
 
 from fastapi import Request, Response
 from fastapi.routing import APIRoute
+from starlette.exceptions import HTTPException
 from starlette.types import Message, Receive
 
 from service.api.deps import resolve_settings
-from service.api.errors import TooLarge
+from service.api.errors import InvalidRequest, TooLarge
 
 __all__ = ["BodyLimitRoute"]
 
@@ -31,9 +32,26 @@ class BodyLimitRoute(APIRoute):
         async def limited(request: Request) -> Response:
             limit = resolve_settings(request.app).max_body_bytes
             body = await read_body(request, limit)
-            return await handler(Request(request.scope, _replay(body, request.receive)))
+            try:
+                return await handler(Request(request.scope, _replay(body, request.receive)))
+            except HTTPException as exc:
+                raise _unparsable(exc) or exc from exc.__cause__
 
         return limited
+
+
+def _unparsable(exc: HTTPException) -> InvalidRequest | None:
+    """A 422 for JSON that parses as syntax but not as Python (else None).
+
+    FastAPI answers 400 "There was an error parsing the body" when the JSON parser
+    raises anything but a syntax error: nesting deeper than the recursion limit, or
+    an integer of more than 4,300 digits. Those are bad input like any other.
+    """
+    cause = exc.__cause__
+    if exc.status_code != 400 or not isinstance(cause, RecursionError | ValueError):
+        return None
+    msg = f"JSON decode error: {cause}"
+    return InvalidRequest([{"loc": ["body"], "msg": msg, "type": "json_invalid"}])
 
 
 async def read_body(request: Request, limit: int) -> bytes:

@@ -162,8 +162,10 @@ async def test_invalid_request_is_422_naming_the_fault(
         (b"[]", "application/json", "body: Input should be a valid dictionary"),
         (b"", "application/json", "body: Field required"),
         (TINY.read_bytes(), "text/plain", "body: Input should be a valid dictionary"),
+        (b"[" * 100_000 + b"]" * 100_000, "application/json", "body: JSON decode error: max"),
+        (b"9" * 5000, "application/json", "body: JSON decode error: Exceeds the limit"),
     ],
-    ids=["malformed", "not an object", "empty", "not declared JSON"],
+    ids=["malformed", "not an object", "empty", "not declared JSON", "deep", "long integer"],
 )
 async def test_malformed_json_is_422(
     client: httpx.AsyncClient, body: bytes, content_type: str, needle: str
