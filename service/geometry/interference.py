@@ -33,6 +33,12 @@ __all__ = ["CO_DIRECTIONAL_DEG", "Boxes", "Segments", "TooComplex", "interferenc
 # Two segments are co-directional when their headings differ by less than this (degrees):
 # robots then drive the shared section the same way and one may follow the other.
 CO_DIRECTIONAL_DEG = 30.0
+# Consecutive segments whose unit headings' cross product is below this are one straight
+# segment (1e-9 rad: only rounding of points placed on a straight line).
+STRAIGHT_TOL = 1e-9
+# Stretches of one piece on consecutive segments of a path touch at the shared vertex,
+# equal up to rounding; closer than this (metres) they merge into one box.
+MERGE_TOL = 1e-9
 # Segments queried per STRtree call, so a runaway candidate count is caught early.
 QUERY_CHUNK = 4096
 
@@ -53,19 +59,38 @@ class Segments:
 
     @classmethod
     def of(cls, paths: Sequence[RobotPath]) -> Segments:
-        """The segments of every path, robot by robot in path order."""
+        """The straight segments of every path, robot by robot in path order.
+
+        Consecutive path segments that continue in the same direction are one straight
+        segment here (the arc lengths are the same either way): a straight aisle sent as
+        100 points costs the geometry no more than sent as 2.
+        """
+        corners = [_corners(p) for p in paths]  # indices of the points where paths turn
         return cls(
-            np.concatenate([np.full(p.arc.size - 1, r) for r, p in enumerate(paths)]),
-            np.concatenate([p.arc[:-1] for p in paths]),
-            np.concatenate([np.diff(p.arc) for p in paths]),
-            np.concatenate([p.points[:-1] for p in paths]),
-            np.concatenate([p.points[1:] for p in paths]),
+            np.concatenate([np.full(k.size - 1, r) for r, k in enumerate(corners)]),
+            np.concatenate([p.arc[k[:-1]] for p, k in zip(paths, corners, strict=True)]),
+            np.concatenate([np.diff(p.arc[k]) for p, k in zip(paths, corners, strict=True)]),
+            np.concatenate([p.points[k[:-1]] for p, k in zip(paths, corners, strict=True)]),
+            np.concatenate([p.points[k[1:]] for p, k in zip(paths, corners, strict=True)]),
         )
 
     @property
     def heading(self) -> np.ndarray:
         """(G, 2) unit direction of travel."""
         return (self.p1 - self.p0) / self.length[:, None]
+
+
+def _corners(path: RobotPath) -> np.ndarray:
+    """(K,) indices of the path's first and last points and of every point where it turns.
+
+    A point is kept unless the segments on both sides point the same way (cross
+    product and heading change within STRAIGHT_TOL), so merging never moves the path.
+    """
+    d = np.diff(path.points, axis=0) / np.diff(path.arc)[:, None]  # (N-1, 2) unit headings
+    cross = d[:-1, 0] * d[1:, 1] - d[:-1, 1] * d[1:, 0]
+    dot = np.einsum("kd,kd->k", d[:-1], d[1:])
+    turns = (np.abs(cross) > STRAIGHT_TOL) | (dot < 0.0)  # (N-2,) at inner points
+    return np.concatenate([[0], np.flatnonzero(turns) + 1, [path.points.shape[0] - 1]])
 
 
 @dataclass(frozen=True, eq=False)
@@ -154,48 +179,122 @@ def _line_capsule(
 
 
 @numba.njit(cache=True, nogil=True)
+def _near_pieces(
+    pair_a: np.ndarray,
+    pair_b: np.ndarray,
+    length: np.ndarray,
+    p0: np.ndarray,
+    p1: np.ndarray,
+    reach: np.ndarray,
+    resolution: float,
+) -> tuple[np.ndarray, np.ndarray]:  # (C,) first and end piece of A within reach of B
+    first = np.zeros(pair_a.size, dtype=np.int64)
+    end = np.zeros(pair_a.size, dtype=np.int64)
+    for c in range(pair_a.size):
+        a, b = pair_a[c], pair_b[c]
+        u = (p1[a] - p0[a]) / length[a]
+        lo, hi = _line_capsule(p0[a], u, p0[b], p1[b], reach[c])
+        lo, hi = max(lo, 0.0), min(hi, length[a])
+        if lo < hi:
+            n_pieces = max(1, int(np.ceil(length[a] / resolution)))
+            step = length[a] / n_pieces
+            first[c] = min(int(lo / step), n_pieces - 1)
+            end[c] = min(int(np.ceil(hi / step)), n_pieces)
+    return first, end
+
+
+@numba.njit(cache=True, nogil=True)
 def _narrow_phase(
-    pair_a: np.ndarray,  # (C,) int segment of the lower robot
+    pair_a: np.ndarray,  # (C,) int segment of the lower robot, sorted by (a, b)
     pair_b: np.ndarray,  # (C,) int segment of the higher robot
+    seg_robot: np.ndarray,  # (G,) int
     s0: np.ndarray,  # (G,) float
     length: np.ndarray,  # (G,) float
     p0: np.ndarray,  # (G, 2) float
     p1: np.ndarray,  # (G, 2) float
     reach: np.ndarray,  # (C,) float, r_i + r_j + margin
+    cos: np.ndarray,  # (C,) float, cosine between the two segments' headings
+    cos_same: float,
     resolution: float,
     max_boxes: int,
-) -> tuple[np.ndarray, np.ndarray, bool]:  # (B,) candidate, (B, 4) x0 x1 y0 y1, complete
-    out_pair = []
-    out_box = []
-    for c in range(pair_a.size):
-        a, b = pair_a[c], pair_b[c]
-        u = (p1[a] - p0[a]) / length[a]
-        v = (p1[b] - p0[b]) / length[b]
-        # Only the stretch of A within reach of the whole of B is cut into pieces.
-        near_lo, near_hi = _line_capsule(p0[a], u, p0[b], p1[b], reach[c])
-        near_lo, near_hi = max(near_lo, 0.0), min(near_hi, length[a])
-        if not near_lo < near_hi:
-            continue
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+    # -> (B, 2) segment a and robot j, (B, 4) x0 x1 y0 y1, (B, 2) co-directional /
+    # head-on, complete.
+    # A piece's stretches on consecutive segments of the same robot j (B's path cut at
+    # its vertices) are merged into one box: a 100-point path makes no more boxes than
+    # the same path drawn with its corners only.
+    near_first, near_end = _near_pieces(pair_a, pair_b, length, p0, p1, reach, resolution)
+    cap = 1024
+    out_j = np.empty((cap, 2), dtype=np.int64)
+    out_box = np.empty((cap, 4))
+    out_way = np.zeros((cap, 2), dtype=np.bool_)
+    n = 0
+    g = 0
+    while g < pair_a.size:  # one group of candidates per segment a
+        a, g_end = pair_a[g], g
+        while g_end < pair_a.size and pair_a[g_end] == a:
+            g_end += 1
         n_pieces = max(1, int(np.ceil(length[a] / resolution)))
-        step = length[a] / n_pieces
-        first = min(int(near_lo / step), n_pieces - 1)
-        last = min(int(np.ceil(near_hi / step)), n_pieces)
-        for k in range(first, last):
+        k_lo, k_hi = near_first[g:g_end].min(), near_end[g:g_end].max()
+        for k in range(k_lo, k_hi):
             f0, f1 = k / n_pieces, (k + 1) / n_pieces
             q0 = p0[a] + f0 * (p1[a] - p0[a])
             q1 = p1[a] if k == n_pieces - 1 else p0[a] + f1 * (p1[a] - p0[a])
-            lo, hi = _line_capsule(p0[b], v, q0, q1, reach[c])
-            lo, hi = max(lo, 0.0), min(hi, length[b])
-            if lo < hi:
-                x1 = s0[a] + length[a] if k == n_pieces - 1 else s0[a] + f1 * length[a]
-                out_pair.append(c)
-                out_box.append((s0[a] + f0 * length[a], x1, s0[b] + lo, s0[b] + hi))
-                if len(out_box) > max_boxes:
-                    return np.zeros(0, dtype=np.int64), np.zeros((0, 4)), False
-    boxes = np.empty((len(out_box), 4))
-    for k in range(len(out_box)):
-        boxes[k, 0], boxes[k, 1], boxes[k, 2], boxes[k, 3] = out_box[k]
-    return np.array(out_pair, dtype=np.int64), boxes, True
+            x0 = s0[a] + f0 * length[a]
+            x1 = s0[a] + length[a] if k == n_pieces - 1 else s0[a] + f1 * length[a]
+            cur_j, cur_lo, cur_hi, same, opposite = -1, 0.0, 0.0, False, False
+            for c in range(g, g_end):
+                if not near_first[c] <= k < near_end[c]:
+                    continue
+                b = pair_b[c]
+                v = (p1[b] - p0[b]) / length[b]
+                lo, hi = _line_capsule(p0[b], v, q0, q1, reach[c])
+                lo, hi = max(lo, 0.0), min(hi, length[b])
+                if not lo < hi:
+                    continue
+                j = seg_robot[b]
+                if j == cur_j and s0[b] + lo <= cur_hi + MERGE_TOL:
+                    cur_hi = max(cur_hi, s0[b] + hi)
+                else:
+                    if cur_j >= 0:  # flush the previous stretch
+                        if n == cap:
+                            cap *= 2
+                            out_j, out_box, out_way = _grow(out_j, out_box, out_way, cap)
+                        out_j[n, 0], out_j[n, 1] = a, cur_j
+                        out_box[n, 0], out_box[n, 1] = x0, x1
+                        out_box[n, 2], out_box[n, 3] = cur_lo, cur_hi
+                        out_way[n, 0], out_way[n, 1] = same, opposite
+                        n += 1
+                        if n > max_boxes:
+                            return out_j[:0], out_box[:0], out_way[:0], False
+                    cur_j, cur_lo, cur_hi = j, s0[b] + lo, s0[b] + hi
+                    same, opposite = False, False
+                same |= cos[c] > cos_same
+                opposite |= cos[c] < -cos_same
+            if cur_j >= 0:
+                if n == cap:
+                    cap *= 2
+                    out_j, out_box, out_way = _grow(out_j, out_box, out_way, cap)
+                out_j[n, 0], out_j[n, 1] = a, cur_j
+                out_box[n, 0], out_box[n, 1] = x0, x1
+                out_box[n, 2], out_box[n, 3] = cur_lo, cur_hi
+                out_way[n, 0], out_way[n, 1] = same, opposite
+                n += 1
+        g = g_end
+    return out_j[:n], out_box[:n], out_way[:n], n <= max_boxes
+
+
+@numba.njit(cache=True, nogil=True)
+def _grow(
+    out_j: np.ndarray, out_box: np.ndarray, out_way: np.ndarray, cap: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The output arrays copied into ones of capacity ``cap``."""
+    n = out_j.shape[0]
+    j = np.empty((cap, 2), dtype=np.int64)
+    box = np.empty((cap, 4))
+    way = np.zeros((cap, 2), dtype=np.bool_)
+    j[:n], box[:n], way[:n] = out_j, out_box, out_way
+    return j, box, way
 
 
 def interference_boxes(
@@ -217,24 +316,36 @@ def interference_boxes(
     grow = 2.0 * float(radius.max()) + margin
     grown = shapely.box(lo[:, 0] - grow, lo[:, 1] - grow, hi[:, 0] + grow, hi[:, 1] + grow)
     a, b = _candidates(tree, grown, segs.robot, max_pairs)
+    order = np.argsort(a * segs.robot.size + b)  # by (a, b): b along its path
+    a, b = a[order], b[order]
     reach = radius[segs.robot[a]] + radius[segs.robot[b]] + margin  # (C,)
-    cand, box, complete = _narrow_phase(
-        a, b, segs.s0, segs.length, segs.p0, segs.p1, reach, float(resolution), max_pairs
+    cos = np.einsum("kd,kd->k", segs.heading[a], segs.heading[b])  # (C,)
+    seg_j, box, way, complete = _narrow_phase(
+        a,
+        b,
+        segs.robot,
+        segs.s0,
+        segs.length,
+        segs.p0,
+        segs.p1,
+        reach,
+        cos,
+        float(np.cos(np.radians(CO_DIRECTIONAL_DEG))),
+        float(resolution),
+        max_pairs,
     )
     if not complete:
         raise TooComplex(
             f"paths interfere in more than {max_pairs} places (max_interference_pairs): "
             "split the request or simplify the paths"
         )
-    a, b = a[cand], b[cand]
-    cos = np.einsum("kd,kd->k", segs.heading[a], segs.heading[b])
     return Boxes(
-        i=segs.robot[a],
-        j=segs.robot[b],
+        i=segs.robot[seg_j[:, 0]],
+        j=seg_j[:, 1],
         x0=box[:, 0],
         x1=box[:, 1],
         y0=box[:, 2],
         y1=box[:, 3],
-        co_directional=cos > np.cos(np.radians(CO_DIRECTIONAL_DEG)),
-        head_on=cos < -np.cos(np.radians(CO_DIRECTIONAL_DEG)),
+        co_directional=way[:, 0],
+        head_on=way[:, 1],
     )
