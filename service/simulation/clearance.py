@@ -100,17 +100,44 @@ def check_clearance(trajectories: Sequence[Trajectory]) -> Clearance:
     boxes = shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1])
     a, b = shapely.STRtree(boxes).query(boxes)
     keep = a < b
-    best: tuple[float, int, int, float] | None = None
-    overlaps = []
-    for i, j in zip(a[keep].tolist(), b[keep].tolist(), strict=True):
-        ti, tj = trajectories[i], trajectories[j]
-        gap, when = _pair_min_gap(ti.t, ti.xy, tj.t, tj.xy, ti.radius + tj.radius)
-        if not np.isfinite(gap):
-            continue
-        if best is None or gap < best[0]:
-            best = (gap, i, j, when)
-        if gap < -TOLERANCE:
-            overlaps.append((i, j, float(when), float(gap)))
-    if best is None:
+    a, b = a[keep], b[keep]
+    start = np.concatenate([[0], np.cumsum([tr.t.size for tr in trajectories])])  # (R+1,)
+    radius = np.array([tr.radius for tr in trajectories])
+    gaps, whens = _pairs_min_gap(
+        np.concatenate([tr.t for tr in trajectories]),
+        np.concatenate([tr.xy for tr in trajectories]),
+        start,
+        radius,
+        a,
+        b,
+    )
+    present = np.isfinite(gaps)
+    if not present.any():
         return Clearance(None, None, None, ())
-    return Clearance(float(best[0]), (best[1], best[2]), float(best[3]), tuple(overlaps))
+    k = int(np.argmin(np.where(present, gaps, np.inf)))
+    bad = np.flatnonzero(present & (gaps < -TOLERANCE))
+    overlaps = tuple((int(a[m]), int(b[m]), float(whens[m]), float(gaps[m])) for m in bad.tolist())
+    return Clearance(float(gaps[k]), (int(a[k]), int(b[k])), float(whens[k]), overlaps)
+
+
+@numba.njit(cache=True, nogil=True)
+def _pairs_min_gap(
+    t: np.ndarray,  # (K,) all waypoint times, robot by robot
+    xy: np.ndarray,  # (K, 2)
+    start: np.ndarray,  # (R+1,) int, robot r's waypoints are start[r]:start[r+1]
+    radius: np.ndarray,  # (R,)
+    a: np.ndarray,  # (C,) int, pairs to check
+    b: np.ndarray,  # (C,) int
+) -> tuple[np.ndarray, np.ndarray]:  # (C,) least gap (inf if never together), when
+    gaps = np.empty(a.size)
+    whens = np.empty(a.size)
+    for c in range(a.size):
+        i, j = a[c], b[c]
+        gaps[c], whens[c] = _pair_min_gap(
+            t[start[i] : start[i + 1]],
+            xy[start[i] : start[i + 1]],
+            t[start[j] : start[j + 1]],
+            xy[start[j] : start[j + 1]],
+            radius[i] + radius[j],
+        )
+    return gaps, whens
