@@ -217,17 +217,13 @@ def _narrow_phase(
     cos_same: float,
     resolution: float,
     max_boxes: int,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
-    # -> (B, 2) segment a and robot j, (B, 4) x0 x1 y0 y1, (B, 2) co-directional /
-    # head-on, complete.
-    # A piece's stretches on consecutive segments of the same robot j (B's path cut at
-    # its vertices) are merged into one box: a 100-point path makes no more boxes than
-    # the same path drawn with its corners only.
+) -> tuple[np.ndarray, bool]:
+    # -> (B, 8) rows [segment a, robot j, x0, x1, y0, y1, co-directional, head-on],
+    # and whether they are complete (at most max_boxes). A piece's stretches on
+    # consecutive segments of the same robot j (its path cut at vertices) merge into
+    # one box: a 100-point path makes no more boxes than drawn with its corners only.
     near_first, near_end = _near_pieces(pair_a, pair_b, length, p0, p1, reach, resolution)
-    cap = 1024
-    out_j = np.empty((cap, 2), dtype=np.int64)
-    out_box = np.empty((cap, 4))
-    out_way = np.zeros((cap, 2), dtype=np.bool_)
+    out = np.empty((1024, 8))
     n = 0
     g = 0
     while g < pair_a.size:  # one group of candidates per segment a
@@ -235,14 +231,13 @@ def _narrow_phase(
         while g_end < pair_a.size and pair_a[g_end] == a:
             g_end += 1
         n_pieces = max(1, int(np.ceil(length[a] / resolution)))
-        k_lo, k_hi = near_first[g:g_end].min(), near_end[g:g_end].max()
-        for k in range(k_lo, k_hi):
+        for k in range(near_first[g:g_end].min(), near_end[g:g_end].max()):
             f0, f1 = k / n_pieces, (k + 1) / n_pieces
             q0 = p0[a] + f0 * (p1[a] - p0[a])
             q1 = p1[a] if k == n_pieces - 1 else p0[a] + f1 * (p1[a] - p0[a])
-            x0 = s0[a] + f0 * length[a]
-            x1 = s0[a] + length[a] if k == n_pieces - 1 else s0[a] + f1 * length[a]
-            cur_j, cur_lo, cur_hi, same, opposite = -1, 0.0, 0.0, False, False
+            row = np.full(8, -1.0)  # the stretch being built, row[1] = -1: none yet
+            row[0], row[2] = a, s0[a] + f0 * length[a]
+            row[3] = s0[a] + length[a] if k == n_pieces - 1 else s0[a] + f1 * length[a]
             for c in range(g, g_end):
                 if not near_first[c] <= k < near_end[c]:
                     continue
@@ -252,49 +247,34 @@ def _narrow_phase(
                 lo, hi = max(lo, 0.0), min(hi, length[b])
                 if not lo < hi:
                     continue
-                j = seg_robot[b]
-                if j == cur_j and s0[b] + lo <= cur_hi + MERGE_TOL:
-                    cur_hi = max(cur_hi, s0[b] + hi)
+                if seg_robot[b] == row[1] and s0[b] + lo <= row[5] + MERGE_TOL:
+                    row[5] = max(row[5], s0[b] + hi)  # the stretch goes on
                 else:
-                    if cur_j >= 0:  # flush the previous stretch
-                        if n == cap:
-                            cap *= 2
-                            out_j, out_box, out_way = _grow(out_j, out_box, out_way, cap)
-                        out_j[n, 0], out_j[n, 1] = a, cur_j
-                        out_box[n, 0], out_box[n, 1] = x0, x1
-                        out_box[n, 2], out_box[n, 3] = cur_lo, cur_hi
-                        out_way[n, 0], out_way[n, 1] = same, opposite
-                        n += 1
-                        if n > max_boxes:
-                            return out_j[:0], out_box[:0], out_way[:0], False
-                    cur_j, cur_lo, cur_hi = j, s0[b] + lo, s0[b] + hi
-                    same, opposite = False, False
-                same |= cos[c] > cos_same
-                opposite |= cos[c] < -cos_same
-            if cur_j >= 0:
-                if n == cap:
-                    cap *= 2
-                    out_j, out_box, out_way = _grow(out_j, out_box, out_way, cap)
-                out_j[n, 0], out_j[n, 1] = a, cur_j
-                out_box[n, 0], out_box[n, 1] = x0, x1
-                out_box[n, 2], out_box[n, 3] = cur_lo, cur_hi
-                out_way[n, 0], out_way[n, 1] = same, opposite
-                n += 1
+                    if row[1] >= 0:  # a new stretch: emit the one built so far
+                        out, n = _emit(out, n, row)
+                    row[1], row[4], row[5] = seg_robot[b], s0[b] + lo, s0[b] + hi
+                    row[6], row[7] = 0.0, 0.0
+                if cos[c] > cos_same:
+                    row[6] = 1.0
+                if cos[c] < -cos_same:
+                    row[7] = 1.0
+            if row[1] >= 0:
+                out, n = _emit(out, n, row)
+            if n > max_boxes:
+                return out[:0], False
         g = g_end
-    return out_j[:n], out_box[:n], out_way[:n], n <= max_boxes
+    return out[:n], True
 
 
 @numba.njit(cache=True, nogil=True)
-def _grow(
-    out_j: np.ndarray, out_box: np.ndarray, out_way: np.ndarray, cap: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The output arrays copied into ones of capacity ``cap``."""
-    n = out_j.shape[0]
-    j = np.empty((cap, 2), dtype=np.int64)
-    box = np.empty((cap, 4))
-    way = np.zeros((cap, 2), dtype=np.bool_)
-    j[:n], box[:n], way[:n] = out_j, out_box, out_way
-    return j, box, way
+def _emit(out: np.ndarray, n: int, row: np.ndarray) -> tuple[np.ndarray, int]:
+    """Append ``row`` at ``out[n]``, doubling ``out`` when full; the new count."""
+    if n == out.shape[0]:
+        grown = np.empty((2 * n, out.shape[1]))
+        grown[:n] = out
+        out = grown
+    out[n] = row
+    return out, n + 1
 
 
 def interference_boxes(
@@ -320,7 +300,7 @@ def interference_boxes(
     a, b = a[order], b[order]
     reach = radius[segs.robot[a]] + radius[segs.robot[b]] + margin  # (C,)
     cos = np.einsum("kd,kd->k", segs.heading[a], segs.heading[b])  # (C,)
-    seg_j, box, way, complete = _narrow_phase(
+    rows, complete = _narrow_phase(
         a,
         b,
         segs.robot,
@@ -340,12 +320,12 @@ def interference_boxes(
             "split the request or simplify the paths"
         )
     return Boxes(
-        i=segs.robot[seg_j[:, 0]],
-        j=seg_j[:, 1],
-        x0=box[:, 0],
-        x1=box[:, 1],
-        y0=box[:, 2],
-        y1=box[:, 3],
-        co_directional=way[:, 0],
-        head_on=way[:, 1],
+        i=segs.robot[rows[:, 0].astype(np.int64)],
+        j=rows[:, 1].astype(np.int64),
+        x0=rows[:, 2],
+        x1=rows[:, 3],
+        y0=rows[:, 4],
+        y1=rows[:, 5],
+        co_directional=rows[:, 6] > 0,
+        head_on=rows[:, 7] > 0,
     )
