@@ -252,7 +252,7 @@ def finish_rows(case: WorldCase, results: dict[str, dict[str, Any]]) -> list[dic
     best = min(known.values(), default=float("inf"))
     if ref_cost is not None and ref_cost <= best * (1 + REL_TOL):
         source, best = f"{REFERENCE_SOLVER} {ref['limit_s']:g} s", ref_cost
-        if ref.get("solver_used") != REFERENCE_SOLVER:
+        if ref.get("solver_used") not in (REFERENCE_SOLVER, "none"):  # none: nothing to solve
             source += f" (answered by its fallback {ref.get('solver_used')})"
     else:
         source = min(known, key=known.__getitem__) if known else None
@@ -272,6 +272,7 @@ def finish_rows(case: WorldCase, results: dict[str, dict[str, Any]]) -> list[dic
                 "message": r["message"],
                 "solver_used": r.get("solver_used"),
                 "fallback_from": r.get("fallback_from"),
+                "detail": r.get("detail"),
                 "conflicts": r.get("conflicts"),
                 "graph_s": r.get("graph_s", float("nan")),
                 "solve_s": r.get("solve_s", float("nan")),
@@ -309,6 +310,8 @@ def run(cfg: Config, progress: bool = True) -> dict[str, Any]:
     if errors:
         raise SystemExit(f"models failed to load: {errors}")
     policy = DispatchPolicy(default_time_limit_s=cfg.time_limit_s, models=models)
+    machine = machine_info()  # the commit the run starts from (others may commit meanwhile)
+    changes = _service_changes()
     load_start = os.getloadavg()[0]  # the machine is shared: other work inflates every time
     warm_up(cfg, policy)
     cases = world_cases(cfg)
@@ -329,8 +332,8 @@ def run(cfg: Config, progress: bool = True) -> dict[str, Any]:
     ]
     return {
         "machine": {
-            **machine_info(),
-            "service_changes": _service_changes(),
+            **machine,
+            "service_changes": changes,
             "load_avg_1min": {"start": load_start, "end": os.getloadavg()[0]},
         },
         "config": jsonable(asdict(cfg)),
@@ -551,15 +554,18 @@ def report(results: dict[str, Any], out: Path) -> str:
     rows = results["rows"]
     summary = summarize(rows, ("family", "robots", "solver"))
     m, c = results["machine"], results["config"]
-    dirty = f" (plus uncommitted service/ changes: {len(m['service_changes'])} files)"
+    dirty = ""
+    if m.get("service_changes") and not m.get("commit_note"):
+        dirty = f" plus uncommitted changes to {len(m['service_changes'])} service/ file(s)"
     text = "\n\n".join(
         [
             f"Run {m['date']} on {m['cpu']} ({m['cpus']} CPUs), commit {m['commit']}"
-            f"{dirty if m.get('service_changes') else ''}; objective {c['objective']}, "
+            f"{dirty}; objective {c['objective']}, "
             f"time limit {c['time_limit_s']:g} s per solve, reference {REFERENCE_SOLVER} "
             f"{c['ref_limit_s']:g} s; {c['worlds']} world(s) per kind and size; from "
             f"{c['fast_only_from']} robots only {', '.join(c['fast_solvers'])}; "
-            f"1-minute load average {_load(m)} (the machine is shared).",
+            f"1-minute load average {_load(m)} (the machine is shared)."
+            + (f" {m['commit_note']}" if m.get("commit_note") else ""),
             failure_text(failures(results)),
             solver_table(summary),
             "Refused with 422 (fixed paths leave no collision-free order), per kind and size:",
