@@ -334,18 +334,21 @@ def _parked_orders(
     near = np.zeros(boxes.size, dtype=bool)  # (B,) a's first point within reach in the box
     for k in np.flatnonzero(boxes.x0 <= 0.0).tolist():
         a, b = paths[int(boxes.i[k])], paths[int(boxes.j[k])]
-        p0, p1 = b.position_at(np.array([boxes.y0[k], boxes.y1[k]]))  # one segment of b
-        near[k] = _point_segment_distance(a.points[0], p0, p1) < a.radius + b.radius + margin
+        gap = _distance_to_stretch(a.points[0], b, float(boxes.y0[k]), float(boxes.y1[k]))
+        near[k] = gap < a.radius + b.radius + margin
     a_parked = np.logical_or.reduceat(near, first) if first.size else np.zeros(0, dtype=bool)
     return np.where(a_parked & b_parked, 2, a_parked.astype(np.int8) - b_parked).astype(np.int8)
 
 
-def _point_segment_distance(q: np.ndarray, p0: np.ndarray, p1: np.ndarray) -> float:
-    """Least distance from point q (2,) to the segment p0-p1 (2,) each."""
-    d = p1 - p0
-    denom = float(d @ d)
-    f = 0.0 if denom <= 0.0 else min(1.0, max(0.0, float((q - p0) @ d) / denom))
-    return float(np.linalg.norm(p0 + f * d - q))
+def _distance_to_stretch(q: np.ndarray, path: RobotPath, s0: float, s1: float) -> float:
+    """Least distance from point q (2,) to ``path`` between arc lengths s0 and s1 (the
+    stretch may turn at path vertices: a box's stretch is not assumed straight)."""
+    inner = path.arc[(path.arc > s0) & (path.arc < s1)]
+    pts = path.position_at(np.concatenate([[s0], inner, [s1]]))  # (K, 2)
+    p0, d = pts[:-1], np.diff(pts, axis=0)  # (K-1, 2)
+    length2 = np.einsum("kd,kd->k", d, d)
+    f = np.clip(np.einsum("kd,kd->k", q - p0, d) / np.maximum(length2, 1e-300), 0.0, 1.0)
+    return float(np.linalg.norm(p0 + f[:, None] * d - q, axis=1).min())
 
 
 def _check_fixed_orders(graph: CoordinationGraph) -> None:

@@ -77,13 +77,14 @@ def assert_graph_sound(req: PathsRequest, graph: CoordinationGraph) -> ScheduleR
 
 
 def _expected_first(graph: CoordinationGraph, m: int) -> int:
-    """+1 / -1 when side a / b of conflict m is parked (its first point within reach of the
-    other's stretch of the section), 0 when neither (both is refused before)."""
+    """+1 / -1 when side a / b of conflict m is parked (the section starts at its first
+    point, which lies within reach of the other's stretch of the section), 0 when neither
+    (both is refused before)."""
     i, j = graph.node_robot[graph.conf_node[m]].tolist()
     a, b = graph.paths[i], graph.paths[j]
     x0, x1, y0, y1 = graph.conf_span[m].tolist()
     reach = a.radius + b.radius + SETTINGS.margin
-    a_parked = distance_to_path(a.points[0], b, y0, y1) < reach
+    a_parked = x0 <= 0.0 and distance_to_path(a.points[0], b, y0, y1) < reach
     b_parked = y0 <= 0.0
     if b_parked:  # b's arc lengths are exact: its first point is within reach of a's section
         assert distance_to_path(b.points[0], a, x0, x1) < reach + 1e-9
@@ -188,6 +189,18 @@ def test_a_start_near_but_outside_a_route_is_not_parked() -> None:
     wire = assert_graph_sound(req, graph)
     assert wire is not None and graph.forced.tolist() == [-1]
     assert graph.conf_span[0, 0] == 0.0  # r0's section does start at its first point
+
+
+def test_a_start_at_the_corner_of_another_route_is_parked() -> None:
+    """r1 turns at r0's first point: r0 is parked (fixed first) even where a box's stretch of
+    r1 spans the corner (a chord between the stretch's ends misses r0's start)."""
+    robots = [
+        robot("r0", [[0.0, 0.0], [0.5, 0.0]], radius=0.25, times=[0.0, 0.5]),
+        robot("r1", [[1.0, 1.0], [0.0, 0.0], [1.0, 0.0]], radius=0.5, speed=1.0),
+    ]
+    req, graph = _graph(robots)
+    assert_graph_sound(req, graph)
+    assert graph.forced.tolist() == [1]
 
 
 def test_parked_robot_passes_first() -> None:
