@@ -107,6 +107,10 @@ def dispatch(
     )
     name = choose_solver(request, problem.n_conflicts, policy)
     start = time.perf_counter()
+    # The cliques first: every solver and the checker need them, and a problem whose
+    # cliques exceed the work budget (TooManyCliques) is refused before any solver
+    # runs, instead of each solver of the fallback chain failing on it in turn.
+    ctx.cliques  # noqa: B018  (builds the cached cliques)
     used, output, checks = _first_valid_answer(ctx, name)
     runtime = time.perf_counter() - start
     info = SolverInfoOut(
