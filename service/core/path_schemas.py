@@ -53,11 +53,12 @@ MAX_COORDINATE = 1e6
 MAX_RADIUS = 1e3
 MAX_SPEED = 1e3
 
+# Strict: numbers must be JSON numbers (no "1.5" strings, no booleans), as in the graph form.
 Coordinate = Annotated[
-    float, Field(strict=False, ge=-MAX_COORDINATE, le=MAX_COORDINATE, allow_inf_nan=False)
+    float, Field(strict=True, ge=-MAX_COORDINATE, le=MAX_COORDINATE, allow_inf_nan=False)
 ]
 Point = tuple[Coordinate, Coordinate]
-Time = Annotated[float, Field(ge=0.0, le=MAX_TIME, allow_inf_nan=False)]
+Time = Annotated[float, Field(strict=True, ge=0.0, le=MAX_TIME, allow_inf_nan=False)]
 Id = Annotated[str, Field(min_length=1, max_length=200)]
 
 
@@ -68,8 +69,10 @@ class PathRobotIn(BaseModel):
 
     id: Id
     path: list[Point] = Field(min_length=2)
-    radius: float = Field(gt=0.0, le=MAX_RADIUS, allow_inf_nan=False)
-    speed: float | None = Field(default=None, gt=0.0, le=MAX_SPEED, allow_inf_nan=False)
+    radius: float = Field(gt=0.0, le=MAX_RADIUS, allow_inf_nan=False, strict=True)
+    speed: float | None = Field(
+        default=None, gt=0.0, le=MAX_SPEED, allow_inf_nan=False, strict=True
+    )
     start_time: Time | None = None
     times: list[Time] | None = None
 

@@ -34,6 +34,9 @@ __all__ = ["STAIRCASE_STEP_M", "Decision", "dependency_plan", "sections", "stair
 # then trails at most this much further behind than it must, and a 250-robot plan keeps
 # ~10^4 rather than ~10^5 constraints (executed and sent over the wire).
 STAIRCASE_STEP_M = 1.0
+# Most wait points one following conflict keeps: a shared stretch longer than this many
+# steps gets longer steps (a kilometre-long corridor must not cost 10^3+ events).
+MAX_STEPS = 100
 
 
 @dataclass(frozen=True, eq=False)
@@ -154,7 +157,8 @@ def _plan_kernel(
                 group_until[label[b]] = max(group_until[label[b]], until[b])
             wait, until = group_wait, group_until
         until, wait = staircase(until, wait)
-        until, wait = thin(until, wait, step)
+        span = wait[-1] - wait[0] if wait.size else 0.0
+        until, wait = thin(until, wait, max(step, span / MAX_STEPS))
         for k in range(wait.size):
             waiters[n_out], waits[n_out] = waiter, wait[k]
             waitees[n_out], untils[n_out] = waitee, until[k]
