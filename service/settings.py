@@ -14,7 +14,7 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Literal
 
-from pydantic import Field, field_validator
+from pydantic import Field, SecretStr, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from service.core.schemas import MAX_TIME_LIMIT_S
@@ -78,12 +78,21 @@ class Settings(BaseSettings):
     max_path_points: int = Field(default=10_000, ge=2)
     max_total_path_points: int = Field(default=500_000, ge=2)
     max_interference_pairs: int = Field(default=5_000_000, ge=1)
+    # Bearer token the POST endpoints require (``Authorization: Bearer <token>``); unset or
+    # empty: no authentication. Probes and metrics stay open.
+    api_token: SecretStr | None = None
 
     @field_validator("log_level", mode="before")
     @classmethod
     def _lower_log_level(cls, value: object) -> object:
         """Accept ``INFO`` as well as ``info``."""
         return value.lower() if isinstance(value, str) else value
+
+    @field_validator("api_token", mode="before")
+    @classmethod
+    def _empty_token_is_none(cls, value: object) -> object:
+        """``SCHEDULER_API_TOKEN=`` (empty) means no authentication, not an empty token."""
+        return None if value in ("", None) else value
 
     @field_validator("large_solver")
     @classmethod

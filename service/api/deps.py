@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import secrets
 from typing import Annotated
 
 from fastapi import Depends, FastAPI, Request
 
-from service.api.errors import NotReady, Unavailable
+from service.api.errors import NotReady, Unauthorized, Unavailable
 from service.api.metrics import Metrics
 from service.api.request_log import RequestRecord, record_of
 from service.api.runtime import Runtime
@@ -18,6 +19,7 @@ __all__ = [
     "RecordDep",
     "RuntimeDep",
     "SettingsDep",
+    "require_token",
     "resolve_settings",
 ]
 
@@ -27,6 +29,19 @@ SettingsDep = Annotated[Settings, Depends(get_settings)]
 def resolve_settings(app: FastAPI) -> Settings:
     """The settings in force outside a dependency (lifespan, body cap), honouring overrides."""
     return app.dependency_overrides.get(get_settings, get_settings)()
+
+
+def require_token(request: Request, settings: SettingsDep) -> None:
+    """401 unless ``Authorization: Bearer <token>`` matches ``api_token`` (when one is set).
+
+    The comparison takes the same time wherever the tokens differ (:func:`secrets.compare_digest`).
+    """
+    if settings.api_token is None:
+        return
+    scheme, _, given = request.headers.get("authorization", "").partition(" ")
+    expected = settings.api_token.get_secret_value().encode()
+    if scheme.lower() != "bearer" or not secrets.compare_digest(given.strip().encode(), expected):
+        raise Unauthorized()
 
 
 def get_runtime(request: Request) -> Runtime:

@@ -4,6 +4,7 @@ Exception tree (each class carries its HTTP status and the ``reason`` label of
 the rejected-requests metric)::
 
     ApiError
+    ├── Unauthorized     401  a POST without the configured bearer token      (unauthorized)
     ├── InvalidRequest   422  the body fails the schema, or is not JSON       (validation)
     ├── InvalidProblem   422  well-typed, but breaks a cross-field rule       (problem_rule)
     ├── TooLarge         413  body bytes, robots, nodes, conflicts or cliques over cap
@@ -12,7 +13,9 @@ the rejected-requests metric)::
         ├── Saturated    503  every solve slot busy and the queue full        (saturated)
         └── NotReady     503  models not loaded yet (warm-up)                 (not_ready)
 
-Saturated and NotReady carry a ``Retry-After`` header (seconds, ``retry_after_s``).
+Saturated and NotReady carry a ``Retry-After`` header (seconds, ``retry_after_s``);
+Unauthorized carries ``WWW-Authenticate: Bearer``. No body ever holds a stack trace
+or a file path: the catch-all names only the exception's class.
 
 422 bodies keep FastAPI's format, ``{"detail": [{"loc", "msg", "type"}]}``; the
 others are ``{"detail": "<message>"}``. Validation errors do not echo the
@@ -39,6 +42,7 @@ __all__ = [
     "NotReady",
     "Saturated",
     "TooLarge",
+    "Unauthorized",
     "Unavailable",
     "error_response",
     "handle_api_error",
@@ -60,6 +64,19 @@ class ApiError(Exception):
         super().__init__(detail)
         self.detail = detail
         self.headers = dict(headers or {})
+
+
+class Unauthorized(ApiError):
+    """A POST without ``Authorization: Bearer <token>`` matching the configured token."""
+
+    status_code = 401
+    reason = "unauthorized"
+
+    def __init__(self) -> None:
+        super().__init__(
+            "missing or wrong bearer token (Authorization: Bearer <token>)",
+            {"WWW-Authenticate": "Bearer"},
+        )
 
 
 class InvalidRequest(ApiError):

@@ -17,9 +17,10 @@ if TYPE_CHECKING:  # runtime imports the errors, which import these metrics
 
 __all__ = ["REJECT_REASONS", "Metrics"]
 
-# Why a request was refused: schema validation, a size cap, a cross-field rule, our fault,
-# a full queue, or not ready yet.
+# Why a request was refused: no valid bearer token, schema validation, a size cap, a
+# cross-field rule, our fault, a full queue, or not ready yet.
 REJECT_REASONS = (
+    "unauthorized",
     "validation",
     "too_large",
     "problem_rule",

@@ -87,6 +87,7 @@ async def test_metrics_count_requests_solves_sizes_and_rejections(
         r: value(samples, "scheduler_rejected_requests_total", reason=r) for r in REJECT_REASONS
     }
     assert rejected == {
+        "unauthorized": 0,
         "validation": 1,
         "too_large": 2,
         "problem_rule": 1,

@@ -4,17 +4,19 @@ from __future__ import annotations
 
 from functools import partial
 
-from fastapi import APIRouter
+from fastapi import APIRouter, Depends
 
 from service.api.body_limit import BodyLimitRoute
-from service.api.deps import RuntimeDep, SettingsDep
+from service.api.deps import RuntimeDep, SettingsDep, require_token
 from service.api.paths import check_path_caps, geometry_settings, run_paths_work
 from service.core.path_schemas import CoordinationGraphResponse, PathsRequest
 from service.motion.plan import coordination_graph
 
 __all__ = ["router"]
 
-router = APIRouter(prefix="/v1", tags=["paths"], route_class=BodyLimitRoute)
+router = APIRouter(
+    prefix="/v1", tags=["paths"], route_class=BodyLimitRoute, dependencies=[Depends(require_token)]
+)
 
 
 @router.post(

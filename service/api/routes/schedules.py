@@ -5,11 +5,11 @@ from __future__ import annotations
 from functools import partial
 from typing import Annotated
 
-from fastapi import APIRouter
+from fastapi import APIRouter, Depends
 from pydantic import Discriminator, Tag
 
 from service.api.body_limit import BodyLimitRoute
-from service.api.deps import MetricsDep, ReadyRuntimeDep, RecordDep, SettingsDep
+from service.api.deps import MetricsDep, ReadyRuntimeDep, RecordDep, SettingsDep, require_token
 from service.api.errors import TooLarge
 from service.api.metrics import Metrics
 from service.api.paths import check_path_caps, geometry_settings, run_paths_work
@@ -23,7 +23,12 @@ from service.solvers.dispatch import dispatch
 
 __all__ = ["router"]
 
-router = APIRouter(prefix="/v1", tags=["schedules"], route_class=BodyLimitRoute)
+router = APIRouter(
+    prefix="/v1",
+    tags=["schedules"],
+    route_class=BodyLimitRoute,
+    dependencies=[Depends(require_token)],
+)
 
 # The two forms of the body: robots with nodes (graph form) or with paths (paths form),
 # told apart by the first robot; a 422 names the field at fault within the chosen form.

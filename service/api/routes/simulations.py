@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from functools import partial
 
-from fastapi import APIRouter
+from fastapi import APIRouter, Depends
 
 from service.api.body_limit import BodyLimitRoute
-from service.api.deps import RuntimeDep, SettingsDep
+from service.api.deps import RuntimeDep, SettingsDep, require_token
 from service.api.errors import TooLarge
 from service.api.paths import check_path_caps, run_paths_work
 from service.core.path_schemas import SimulationRequest, SimulationResponse
@@ -15,7 +15,9 @@ from service.simulation.simulate import simulate
 
 __all__ = ["router"]
 
-router = APIRouter(prefix="/v1", tags=["paths"], route_class=BodyLimitRoute)
+router = APIRouter(
+    prefix="/v1", tags=["paths"], route_class=BodyLimitRoute, dependencies=[Depends(require_token)]
+)
 
 
 @router.post(
