@@ -111,6 +111,39 @@ def bids_from_ranks(problem: Problem, ranks: np.ndarray) -> np.ndarray:
     return bids
 
 
+@numba.njit(cache=True, nogil=True)
+def _greedy_kernel(
+    order: np.ndarray,  # (S, B) int, each sample's bound conflicts, best score first
+    cand: np.ndarray,  # (S, B) bool, candidates for following-type
+    cliques: np.ndarray,  # (B, P) int, binding cliques of each bound conflict (padded)
+    budget: np.ndarray,  # (Q+1,) int, each clique's budget (the padding clique unbounded)
+) -> np.ndarray:  # (S, B) bool, chosen following-type
+    """Per sample, take candidates in order while every clique they are in has budget.
+
+    A numba loop: the same greedy vectorized over samples in numpy measured seconds
+    on 250-robot path graphs (tens of thousands of bound conflicts).
+    """
+    n_samples, n_bound = order.shape
+    chosen = np.zeros((n_samples, n_bound), dtype=np.bool_)
+    left = np.empty_like(budget)
+    for s in range(n_samples):
+        left[:] = budget
+        for k in range(n_bound):
+            e = order[s, k]
+            if not cand[s, e]:
+                continue
+            ok = True
+            for q in cliques[e]:
+                if left[q] <= 0:
+                    ok = False
+                    break
+            if ok:
+                for q in cliques[e]:
+                    left[q] -= 1
+                chosen[s, e] = True
+    return chosen
+
+
 class Decoder:
     """Decodes bids and scores of one problem into valid assignments."""
 
@@ -213,21 +246,11 @@ class Decoder:
 
     def _greedy(self, scores: np.ndarray, candidate: np.ndarray) -> np.ndarray:
         """Greedy budgeted choice over the binding conflicts -> (S, B) bool."""
-        n_samples = scores.shape[0]
-        rows = np.arange(n_samples)
         bound = self._bound_edges
         # Descending score, ties by conflict index (stable sort of the negated score).
         order = np.argsort(-scores[:, bound], axis=1, kind="stable")  # (S, B)
-        budget = np.broadcast_to(self._budget, (n_samples, self._budget.size)).copy()
-        chosen = np.zeros((n_samples, bound.size), dtype=bool)
-        cand = candidate[:, bound]
-        for k in range(bound.size):
-            e = order[:, k]  # (S,) local index of each sample's k-th best conflict
-            cliques = self._bound_cliques[e]  # (S, P)
-            ok = cand[rows, e] & np.all(budget[rows[:, None], cliques] > 0, axis=1)
-            budget[rows[:, None], cliques] -= ok[:, None]
-            chosen[rows, e] = ok
-        return chosen
+        cand = np.ascontiguousarray(candidate[:, bound])
+        return _greedy_kernel(order, cand, self._bound_cliques, self._budget)
 
     def decode(
         self, bids: np.ndarray, scores: np.ndarray, threshold: float | None = None
