@@ -117,12 +117,14 @@ def plan_paths(
         answer = dispatch(graph_request, policy, deadline=solve_due)
     solve_done = time.perf_counter()
     executed = _execute_safely(graph, _decision(graph, answer))
-    timings = TimingsOut(
+    response = _render(request, graph, graph_request, answer, executed, solve_done - graph_done)
+    # Motion: everything after the solve, building this answer included.
+    response.timings = TimingsOut(
         graph_s=graph_done - start,
         solve_s=solve_done - graph_done,
         motion_s=time.perf_counter() - solve_done,
     )
-    return _render(request, graph, graph_request, answer, executed, timings)
+    return response
 
 
 def _decision(graph: CoordinationGraph, answer: ScheduleResponse | None) -> Decision:
@@ -165,7 +167,7 @@ def _render(
     graph_request: ScheduleRequest | None,
     answer: ScheduleResponse | None,
     executed: _Executed,
-    timings: TimingsOut,
+    solve_s: float,
 ) -> PathsScheduleResponse:
     """The wire answer: the graph answer's fields, re-described by the executed motion."""
     paths, run = graph.paths, executed.run
@@ -197,7 +199,7 @@ def _render(
         costs=CostsOut(**costs),
         assignment=_assignment(graph, executed.decision),
         schedule=schedule,
-        solver=_solver_info(answer, executed, timings.solve_s),
+        solver=_solver_info(answer, executed, solve_s),
         checks=MotionChecksOut(
             acyclic=True if answer is None else answer.checks.acyclic,
             density=True if answer is None else answer.checks.density,
@@ -215,7 +217,7 @@ def _render(
             for path, tr in zip(paths, executed.trajectories, strict=True)
         ],
         dependencies=plan_to_wire(paths, executed.plan),
-        timings=timings,
+        timings=TimingsOut(graph_s=0.0, solve_s=solve_s, motion_s=0.0),  # set by the caller
     )
 
 
