@@ -3,9 +3,14 @@
 from __future__ import annotations
 
 import json
+import os
+import socket
+import subprocess
+import sys
+import time
 from collections import Counter
-from collections.abc import Callable
-from contextlib import AbstractAsyncContextManager
+from collections.abc import Callable, Iterator
+from contextlib import AbstractAsyncContextManager, contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +28,8 @@ from service.core.schemas import ScheduleRequest
 
 TINY = Path(__file__).parents[2] / "schemas" / "examples" / "tiny.json"
 READY_TIMEOUT_S = 60.0
+# A server process: imports (torch, ortools) and warm-up on a loaded machine.
+START_TIMEOUT_S = 120.0
 
 # The ``serve`` fixture: ``async with serve(settings, ready=..., app=...) as client``.
 Serve = Callable[..., AbstractAsyncContextManager[httpx.AsyncClient]]
@@ -34,6 +41,50 @@ async def wait_ready(client: httpx.AsyncClient) -> httpx.Response:
         while (response := await client.get("/readyz")).status_code != 200:
             await anyio.sleep(0.01)
     return response
+
+
+def free_port() -> int:
+    """A loopback port nothing listens on (now)."""
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+@contextmanager
+def service_process(log: Path) -> Iterator[str]:
+    """Base URL of a ``python -m service`` on a free port, logging to ``log``; stopped after.
+
+    The log is printed at the end (pytest shows it only when the test failed).
+    """
+    port = free_port()
+    env = {**os.environ, "SCHEDULER_HOST": "127.0.0.1", "SCHEDULER_PORT": str(port)}
+    with log.open("wb") as out:
+        process = subprocess.Popen(
+            [sys.executable, "-m", "service"], env=env, stdout=out, stderr=subprocess.STDOUT
+        )
+    try:
+        yield f"http://127.0.0.1:{port}"
+    finally:
+        process.terminate()
+        try:
+            process.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait(timeout=20)
+        print(log.read_text())
+
+
+def wait_ready_sync(client: httpx.Client) -> None:
+    """Poll a server process's ``/readyz`` until it answers 200 (bounded)."""
+    deadline = time.monotonic() + START_TIMEOUT_S
+    while time.monotonic() < deadline:
+        try:
+            if client.get("/readyz").status_code == 200:
+                return
+        except httpx.TransportError:
+            pass
+        time.sleep(0.2)
+    pytest.fail(f"service not ready within {START_TIMEOUT_S} s")
 
 
 async def post_json(client: httpx.AsyncClient, body: Any) -> httpx.Response:

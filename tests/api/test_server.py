@@ -3,10 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
-import socket
-import subprocess
-import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -14,54 +10,19 @@ from pathlib import Path
 import httpx
 import pytest
 
-from .helpers import TINY, assert_valid_answer
-
-START_TIMEOUT_S = 120.0  # imports (torch, ortools) and warm-up on a loaded machine
-
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
+from .helpers import TINY, assert_valid_answer, service_process, wait_ready_sync
 
 
 @pytest.fixture
 def server(tmp_path: Path) -> Iterator[str]:
     """Base URL of a running ``python -m service``; the process is stopped afterwards."""
-    port = free_port()
-    env = {**os.environ, "SCHEDULER_HOST": "127.0.0.1", "SCHEDULER_PORT": str(port)}
-    log = tmp_path / "server.log"
-    with log.open("wb") as out:
-        process = subprocess.Popen(
-            [sys.executable, "-m", "service"], env=env, stdout=out, stderr=subprocess.STDOUT
-        )
-    try:
-        yield f"http://127.0.0.1:{port}"
-    finally:
-        process.terminate()
-        try:
-            process.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait(timeout=20)
-        print(log.read_text())  # shown by pytest only when the test failed
-
-
-def wait_ready(client: httpx.Client) -> None:
-    deadline = time.monotonic() + START_TIMEOUT_S
-    while time.monotonic() < deadline:
-        try:
-            if client.get("/readyz").status_code == 200:
-                return
-        except httpx.TransportError:
-            pass
-        time.sleep(0.2)
-    pytest.fail(f"service not ready within {START_TIMEOUT_S} s")
+    with service_process(tmp_path / "server.log") as url:
+        yield url
 
 
 def test_python_m_service_serves_the_tiny_request(server: str) -> None:
     with httpx.Client(base_url=server, timeout=30.0) as client:
-        wait_ready(client)
+        wait_ready_sync(client)
         assert client.get("/healthz").status_code == 200
         request = json.loads(TINY.read_text())
         response = client.post("/v1/schedules", json=request)
@@ -74,7 +35,7 @@ def test_python_m_service_serves_the_tiny_request(server: str) -> None:
 
 def test_every_log_line_is_json_with_one_line_per_request(server: str, tmp_path: Path) -> None:
     with httpx.Client(base_url=server, timeout=30.0) as client:
-        wait_ready(client)
+        wait_ready_sync(client)
         request = json.loads(TINY.read_text())
         client.post("/v1/schedules", json=request, headers={"X-Request-ID": "trace-2"})
         client.post("/v1/schedules", json={"robots": []})
