@@ -11,7 +11,7 @@ import pytest
 
 # deploy/ is a folder of scripts, not a package: load the script by its path.
 SPEC = importlib.util.spec_from_file_location(
-    "load", Path(__file__).parents[2] / "deploy" / "load.py"
+    "deploy_load", Path(__file__).parents[2] / "deploy" / "load.py"
 )
 assert SPEC is not None and SPEC.loader is not None
 load = importlib.util.module_from_spec(SPEC)
