@@ -8,7 +8,7 @@ through the heads. Deterministic for a seed (a private torch.Generator).
 from __future__ import annotations
 
 import time
-from collections.abc import Iterator
+from collections.abc import Generator
 from dataclasses import dataclass
 
 import numpy as np
@@ -42,6 +42,10 @@ __all__ = [
 # batch took the server to 7.2 GB (issue 14).
 CHUNK_BYTES = 256 * 1024 * 1024
 HEAD_BYTES_PER_CELL = 12  # per node or conflict and hidden unit
+# Draws of the first chunk when sampling has a deadline: enough to measure the rate of a
+# large graph (a 17,000-conflict path graph: ~0.05 s per draw) and size the next chunks
+# to the time left, instead of one 100-draw chunk running seconds past the deadline.
+FIRST_TIMED_ROWS = 8
 DECODE_BYTES_PER_CELL = 16  # per robot and position along the longest path
 
 # Largest log-std of the multiplicative bid perturbation (see :func:`propose`);
@@ -78,8 +82,13 @@ def propose(
 
 @torch.inference_mode()
 def propose_chunks(
-    model: GnnVae, graph: GraphTensors, samples: int, seed: int, rows: int
-) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    model: GnnVae,
+    graph: GraphTensors,
+    samples: int,
+    seed: int,
+    rows: int,
+    first: int | None = None,
+) -> Generator[tuple[np.ndarray, np.ndarray], float | None, None]:
     """Bids and following probabilities of ``samples`` draws, ``rows`` draws at a time.
 
     The draws form a ladder: draw k scales its latent z ~ N(0, I) and a
@@ -89,7 +98,9 @@ def propose_chunks(
     uses its latent little (KL ~0.1 nats), and on held-out validation problems
     the ladder raised the best-of-100 ratio from 0.9885 to 0.9996.
     The trunk runs once, the heads once per chunk of ``rows`` draws, only when the
-    chunk is asked for; the random draws do not depend on ``rows``.
+    chunk is asked for; the random draws do not depend on ``rows``. The first chunk
+    has ``first`` draws (default ``rows``); ``send(n)`` instead of ``next()`` asks
+    for a next chunk of n draws, at most ``rows`` (a time-sized chunk).
 
     Shapes: -> per chunk of n draws: bids (n, V) float64 > 0, probabilities (n, M) float64.
     """
@@ -99,10 +110,13 @@ def propose_chunks(
     noise = torch.randn(samples, graph.x.shape[0], generator=gen) * (BID_NOISE * ladder)  # (S, V)
     h = model.embed(graph.x, graph.edge_index, graph.edge_attr)  # (V, H)
     conf = graph.conf.T.contiguous()
-    for lo in range(0, samples, rows):
-        bids, logits = model.sample_heads(h, conf, z[lo : lo + rows])  # (n, V), (n, M)
-        bids = bids * noise[lo : lo + rows].exp()
-        yield bids.double().numpy(), torch.sigmoid(logits).double().numpy()
+    lo, n = 0, rows if first is None else max(1, min(first, rows))
+    while lo < samples:
+        bids, logits = model.sample_heads(h, conf, z[lo : lo + n])  # (n, V), (n, M)
+        bids = bids * noise[lo : lo + n].exp()
+        lo += n
+        asked = yield bids.double().numpy(), torch.sigmoid(logits).double().numpy()
+        n = rows if asked is None else max(1, min(int(asked), rows))
 
 
 def sample_best(
@@ -123,13 +137,19 @@ def sample_best(
     count; the answer is the one a single batch would give (ties go to the lower
     row of the unchunked order: thresholded rows first, then filled ones, see
     :func:`service.core.decode.decode_candidates`). Past ``deadline``
-    (``time.monotonic()``), no further chunk starts: the first always runs.
+    (``time.monotonic()``), no further chunk starts: the first always runs. With a
+    deadline the first chunk is small (FIRST_TIMED_ROWS draws) and later ones are
+    sized to the time left at the rate measured so far, so that a chunk of a large
+    graph does not run far past the deadline.
     """
     rows = chunk_rows(decoder.problem, model.config.hidden)
-    chunks = propose_chunks(model, graph, samples, seed, rows)
+    timed = deadline is not None
+    first = FIRST_TIMED_ROWS if timed else None
+    chunks = propose_chunks(model, graph, samples, seed, rows, first)
     best: tuple[float, int, Assignments] | None = None
-    decoded = 0
-    for bids, probs in chunks:
+    decoded, started = 0, time.monotonic()
+    bids, probs = next(chunks)
+    while True:
         candidates = decode_candidates(decoder, bids, probs, objective)
         costs = evaluator.evaluate(candidates).costs[objective]  # (n,) or (2n,)
         row = int(np.argmin(costs))
@@ -137,8 +157,12 @@ def sample_best(
         if best is None or chunk < best[:2]:
             best = (*chunk, candidates.take(row))
         decoded += len(bids)
-        if deadline is not None and time.monotonic() >= deadline:
+        now = time.monotonic()
+        if decoded >= samples or (deadline is not None and now >= deadline):
             break
+        # Time-sized next chunk: the draws that fit the time left at the rate so far.
+        fit = None if deadline is None else (deadline - now) * decoded / (now - started)
+        bids, probs = chunks.send(fit)
     assert best is not None  # samples >= 1: at least one chunk
     return Sampled(best[2], best[0], decoded)
 
@@ -151,9 +175,14 @@ def best_of(
     objective: Objective,
     samples: int,
     seed: int,
+    *,
+    deadline: float | None = None,
 ) -> tuple[Assignments, float]:
-    """The cheapest of all ``samples`` decoded samples (a batch of one) and its cost."""
-    best = sample_best(model, graph, decoder, evaluator, objective, samples, seed)
+    """The cheapest of the decoded samples (a batch of one) and its cost: all ``samples``,
+    or those decoded by ``deadline`` (``time.monotonic()``, see :func:`sample_best`)."""
+    best = sample_best(
+        model, graph, decoder, evaluator, objective, samples, seed, deadline=deadline
+    )
     return best.assignment, best.cost
 
 

@@ -25,7 +25,7 @@ import time
 import numpy as np
 
 from service.learning.features import graph_tensors
-from service.learning.infer import best_of
+from service.learning.infer import sample_best
 from service.solvers.fcfs import fcfs
 from service.solvers.gnn_vae import DEFAULT_SAMPLES
 from service.solvers.registry import SolveContext, SolverOutput, register
@@ -47,15 +47,25 @@ def gnn_vae_refined(ctx: SolveContext) -> SolverOutput | None:
     budget = min(REFINE_SECONDS, ctx.time_limit_s)
     samples = ctx.samples or DEFAULT_SAMPLES
     graph = graph_tensors(ctx.problem, ctx.cliques)
-    sampled, _ = best_of(
-        stored.model, graph, ctx.decoder, ctx.evaluator, ctx.objective, samples, ctx.seed
+    sampled = sample_best(
+        stored.model,
+        graph,
+        ctx.decoder,
+        ctx.evaluator,
+        ctx.objective,
+        samples,
+        ctx.seed,
+        deadline=time.monotonic() + budget / 2,  # the samples get at most half the budget
     )
-    best, best_cost, iterations = sampled, np.inf, 0
-    for k, tabu_start in enumerate((sampled, fcfs(ctx).assignment)):
+    best, best_cost, iterations = sampled.assignment, np.inf, 0
+    for k, tabu_start in enumerate((sampled.assignment, fcfs(ctx).assignment)):
         left = (budget - (time.perf_counter() - start)) / (2 - k)  # half now, the rest next
         found, cost, runs = tabu_search(ctx, tabu_start, budget_s=max(left, 0.0))
         iterations += runs
         if cost < best_cost:
             best, best_cost = found, cost
-    detail = f"best of {samples} samples, then {iterations} tabu iterations from it and from FCFS"
-    return SolverOutput(best, model=stored.name, samples=samples, detail=detail)
+    detail = (
+        f"best of {sampled.samples} of {samples} samples (at most half the budget), "
+        f"then {iterations} tabu iterations from it and from FCFS"
+    )
+    return SolverOutput(best, model=stored.name, samples=sampled.samples, detail=detail)
