@@ -11,10 +11,11 @@ from __future__ import annotations
 import time
 
 from service.learning.features import graph_tensors
-from service.learning.infer import sample_best
+from service.learning.infer import Sampled, sample_best
+from service.learning.store import StoredModel
 from service.solvers.registry import SolveContext, SolverOutput, register
 
-__all__ = ["DEFAULT_SAMPLES", "gnn_vae"]
+__all__ = ["DEFAULT_SAMPLES", "gnn_vae", "sample_model"]
 
 # Samples per request when the request does not say: the published default.
 DEFAULT_SAMPLES = 100
@@ -30,10 +31,21 @@ def gnn_vae(ctx: SolveContext) -> SolverOutput | None:
     stored = ctx.models.get(ctx.objective)
     if stored is None:
         return None
-    deadline = time.monotonic() + ctx.time_limit_s
     samples = ctx.samples or DEFAULT_SAMPLES
+    best = sample_model(ctx, stored, samples, time.monotonic() + ctx.time_limit_s)
+    detail = None
+    if best.samples < samples:
+        detail = f"time limit reached after {best.samples} of {samples} samples"
+    return SolverOutput(
+        best.assignment, optimal=False, model=stored.name, samples=best.samples, detail=detail
+    )
+
+
+def sample_model(ctx: SolveContext, stored: StoredModel, samples: int, deadline: float) -> Sampled:
+    """The best of ``samples`` decoded draws of ``stored``'s model for ``ctx``'s problem, or
+    of those decoded by ``deadline`` (``time.monotonic()``)."""
     graph = graph_tensors(ctx.problem, ctx.cliques)
-    best = sample_best(
+    return sample_best(
         stored.model,
         graph,
         ctx.decoder,
@@ -42,10 +54,4 @@ def gnn_vae(ctx: SolveContext) -> SolverOutput | None:
         samples,
         ctx.seed,
         deadline=deadline,
-    )
-    detail = None
-    if best.samples < samples:
-        detail = f"time limit reached after {best.samples} of {samples} samples"
-    return SolverOutput(
-        best.assignment, optimal=False, model=stored.name, samples=best.samples, detail=detail
     )

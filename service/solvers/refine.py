@@ -24,10 +24,8 @@ import time
 
 import numpy as np
 
-from service.learning.features import graph_tensors
-from service.learning.infer import sample_best
 from service.solvers.fcfs import fcfs
-from service.solvers.gnn_vae import DEFAULT_SAMPLES
+from service.solvers.gnn_vae import DEFAULT_SAMPLES, sample_model
 from service.solvers.registry import SolveContext, SolverOutput, register
 from service.solvers.tabu import tabu_search
 
@@ -46,17 +44,8 @@ def gnn_vae_refined(ctx: SolveContext) -> SolverOutput | None:
     start = time.perf_counter()
     budget = min(REFINE_SECONDS, ctx.time_limit_s)
     samples = ctx.samples or DEFAULT_SAMPLES
-    graph = graph_tensors(ctx.problem, ctx.cliques)
-    sampled = sample_best(
-        stored.model,
-        graph,
-        ctx.decoder,
-        ctx.evaluator,
-        ctx.objective,
-        samples,
-        ctx.seed,
-        deadline=time.monotonic() + budget / 2,  # the samples get at most half the budget
-    )
+    # The samples get at most half the budget; tabu the rest.
+    sampled = sample_model(ctx, stored, samples, time.monotonic() + budget / 2)
     best, best_cost, iterations = sampled.assignment, np.inf, 0
     for k, tabu_start in enumerate((sampled.assignment, fcfs(ctx).assignment)):
         left = (budget - (time.perf_counter() - start)) / (2 - k)  # half now, the rest next
