@@ -40,6 +40,7 @@ from tqdm import tqdm
 from bench.problems import BenchProblem, small_set, stitched_set
 from bench.report import (
     JsonCache,
+    add_run_args,
     delay_ratio,
     fmt,
     format_table,
@@ -530,13 +531,7 @@ def _parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     p.add_argument("--ref-limit", type=float, dest="ref_limit_s", help="reference CP-SAT seconds")
     p.add_argument("--ablation-sizes", type=int, nargs="*")
     p.add_argument("--ablation-samples", type=int, nargs="+")
-    p.add_argument("--seed", type=int, dest="base_seed")
-    p.add_argument("--store", type=Path, help="model store")
-    p.add_argument("--out", type=Path)
-    p.add_argument("--cache", type=Path)
-    p.add_argument(
-        "--summarize", action="store_true", help="re-render from --out/results.json only"
-    )
+    add_run_args(p)
     return p.parse_args(argv)
 
 

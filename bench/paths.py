@@ -49,6 +49,7 @@ from tqdm import tqdm
 
 from bench.report import (
     JsonCache,
+    add_run_args,
     config_from_args,
     delay_ratio,
     fmt,
@@ -592,13 +593,7 @@ def _parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     p.add_argument("--objective", choices=OBJECTIVES)
     p.add_argument("--time-limit", type=float, dest="time_limit_s", help="seconds per solve")
     p.add_argument("--ref-limit", type=float, dest="ref_limit_s", help="reference exact seconds")
-    p.add_argument("--seed", type=int, dest="base_seed")
-    p.add_argument("--store", type=Path, help="model store")
-    p.add_argument("--out", type=Path)
-    p.add_argument("--cache", type=Path)
-    p.add_argument(
-        "--summarize", action="store_true", help="re-render from --out/results.json only"
-    )
+    add_run_args(p)
     return p.parse_args(argv)
 
 

@@ -68,6 +68,17 @@ def jsonable(d: dict[str, Any]) -> dict[str, Any]:
     return {k: str(v) if isinstance(v, Path) else v for k, v in d.items()}
 
 
+def add_run_args(p: argparse.ArgumentParser) -> None:
+    """The flags every sweep benchmark shares: seed, model store, output, cache, re-render."""
+    p.add_argument("--seed", type=int, dest="base_seed")
+    p.add_argument("--store", type=Path, help="model store")
+    p.add_argument("--out", type=Path)
+    p.add_argument("--cache", type=Path)
+    p.add_argument(
+        "--summarize", action="store_true", help="re-render from --out/results.json only"
+    )
+
+
 def config_from_args(
     args: argparse.Namespace, full: C, quick: C, skip: Sequence[str] = ("quick", "summarize")
 ) -> C:
