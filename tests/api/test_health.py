@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import json
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import AsyncIterator, Callable, Iterator
+from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Any
 
@@ -164,32 +165,44 @@ async def test_probes_answer_during_a_long_solve(
     assert responses[0].status_code == 200
 
 
+@asynccontextmanager
+async def one_running_one_queued(
+    client: httpx.AsyncClient, app: Any, monkeypatch: pytest.MonkeyPatch, body: dict
+) -> AsyncIterator[tuple[BlockingSolver, Any, list[httpx.Response]]]:
+    """Two posts of ``body``: one blocked in its solve, one queued behind it (with one
+    solve slot); inside the block both are pending, and they are released on exit."""
+    blocking = BlockingSolver()
+    blocking.install(monkeypatch)
+    pool = app.state.runtime.limiter
+    responses: list[httpx.Response] = []
+    async with anyio.create_task_group() as tasks:
+
+        async def solve() -> None:
+            responses.append(await post_json(client, body))
+
+        tasks.start_soon(solve)
+        tasks.start_soon(solve)
+        try:
+            with anyio.fail_after(WAIT_S):
+                while pool.waiting < 1 or not blocking.started.is_set():
+                    await anyio.sleep(0.01)
+            yield blocking, pool, responses
+        finally:
+            blocking.release.set()
+
+
 async def test_solves_beyond_solve_concurrency_wait(
     serve: Serve, monkeypatch: pytest.MonkeyPatch, tiny: dict
 ) -> None:
     app = create_app()
-    async with serve(Settings(solve_concurrency=1), app=app) as client:
-        blocking = BlockingSolver()
-        blocking.install(monkeypatch)
-        pool = app.state.runtime.limiter
-        responses: list[httpx.Response] = []
-        async with anyio.create_task_group() as tasks:
-
-            async def solve() -> None:
-                responses.append(await post_json(client, tiny))
-
-            tasks.start_soon(solve)
-            tasks.start_soon(solve)
-            try:
-                with anyio.fail_after(WAIT_S):
-                    while pool.waiting < 1 or not blocking.started.is_set():
-                        await anyio.sleep(0.01)
-                assert blocking.entered == 1 and pool.running == 1
-                metrics = (await client.get("/metrics")).text
-                assert "scheduler_queued_solves 1.0" in metrics
-                assert "scheduler_running_solves 1.0" in metrics
-            finally:
-                blocking.release.set()
+    async with (
+        serve(Settings(solve_concurrency=1), app=app) as client,
+        one_running_one_queued(client, app, monkeypatch, tiny) as (blocking, pool, responses),
+    ):
+        assert blocking.entered == 1 and pool.running == 1
+        metrics = (await client.get("/metrics")).text
+        assert "scheduler_queued_solves 1.0" in metrics
+        assert "scheduler_running_solves 1.0" in metrics
     assert [r.status_code for r in responses] == [200, 200]
     assert blocking.entered == 2
 
@@ -200,24 +213,8 @@ async def test_a_full_queue_is_503_with_retry_after(
     app = create_app()
     settings = Settings(solve_concurrency=1, queue_size=1, retry_after_s=3)
     async with serve(settings, app=app) as client:
-        blocking = BlockingSolver()
-        blocking.install(monkeypatch)
-        pool = app.state.runtime.limiter
-        responses: list[httpx.Response] = []
-        async with anyio.create_task_group() as tasks:
-
-            async def solve() -> None:
-                responses.append(await post_json(client, tiny))
-
-            tasks.start_soon(solve)
-            tasks.start_soon(solve)
-            try:
-                with anyio.fail_after(WAIT_S):
-                    while pool.waiting < 1 or not blocking.started.is_set():
-                        await anyio.sleep(0.01)
-                refused = await post_json(client, tiny)
-            finally:
-                blocking.release.set()
+        async with one_running_one_queued(client, app, monkeypatch, tiny) as (_, _, responses):
+            refused = await post_json(client, tiny)
         rejected = (await client.get("/metrics")).text
     assert refused.status_code == 503 and refused.headers["retry-after"] == "3"
     assert "saturated" in refused.json()["detail"]
