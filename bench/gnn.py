@@ -38,7 +38,7 @@ from service.core.problem import Problem, problem_from_request
 from service.core.schemas import OBJECTIVES, ScheduleRequest
 from service.learning.features import graph_tensors
 from service.learning.generate import small_problem, stitched_problem
-from service.learning.infer import best_of
+from service.learning.infer import sample_best
 from service.learning.store import StoredModel, load_all
 from service.solvers.exact import solve
 from service.solvers.fcfs import fcfs
@@ -71,10 +71,10 @@ def run_gnn(
     cliques = find_cliques(prep.problem)
     evaluator = Evaluator(prep.problem)
     graph = graph_tensors(prep.problem, cliques)
-    _, cost = best_of(
+    best = sample_best(
         stored.model, graph, Decoder(prep.problem, cliques), evaluator, objective, samples, seed=0
     )
-    return cost, time.perf_counter() - start
+    return best.cost, time.perf_counter() - start
 
 
 def run_refined(

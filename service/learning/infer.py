@@ -26,7 +26,6 @@ __all__ = [
     "BID_NOISE",
     "CHUNK_BYTES",
     "Sampled",
-    "best_of",
     "chunk_rows",
     "propose",
     "propose_chunks",
@@ -165,25 +164,6 @@ def sample_best(
         bids, probs = chunks.send(fit)
     assert best is not None  # samples >= 1: at least one chunk
     return Sampled(best[2], best[0], decoded)
-
-
-def best_of(
-    model: GnnVae,
-    graph: GraphTensors,
-    decoder: Decoder,
-    evaluator: Evaluator,
-    objective: Objective,
-    samples: int,
-    seed: int,
-    *,
-    deadline: float | None = None,
-) -> tuple[Assignments, float]:
-    """The cheapest of the decoded samples (a batch of one) and its cost: all ``samples``,
-    or those decoded by ``deadline`` (``time.monotonic()``, see :func:`sample_best`)."""
-    best = sample_best(
-        model, graph, decoder, evaluator, objective, samples, seed, deadline=deadline
-    )
-    return best.assignment, best.cost
 
 
 def _unchunked_row(row: int, lo: int, n: int, samples: int) -> int:

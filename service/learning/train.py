@@ -34,7 +34,7 @@ from tqdm import tqdm
 from service.core.schemas import OBJECTIVES
 from service.learning.data import iter_problems, load_manifest
 from service.learning.dataset import Example, examples_from_records, to_data
-from service.learning.infer import best_of
+from service.learning.infer import sample_best
 from service.learning.model import GnnVae, GnnVaeConfig, chain_ranks
 from service.learning.store import save_model
 
@@ -81,7 +81,8 @@ def validate(
     model.eval()
     ratios, gaps = [], []
     for i, ex in enumerate(examples):
-        _, cost = best_of(model, ex.graph, ex.decoder, ex.evaluator, objective, samples, seed=i)
+        best = sample_best(model, ex.graph, ex.decoder, ex.evaluator, objective, samples, seed=i)
+        cost = best.cost
         span = float(np.ptp(ex.problem.tp_time)) or 1.0
         gaps.append((cost - ex.opt_cost) / span)
         ratios.append(ex.opt_cost / cost if cost > 0 else 1.0)

@@ -23,7 +23,7 @@ from service.learning.data import DatasetConfig, build_dataset, solve_problem
 from service.learning.dataset import examples_from_records, to_data
 from service.learning.features import NODE_DIM, graph_tensors
 from service.learning.generate import GeneratorConfig, small_problem, stitched_problem
-from service.learning.infer import best_of, propose
+from service.learning.infer import propose, sample_best
 from service.learning.model import GnnVae, GnnVaeConfig
 from service.learning.store import ModelLoadError, load_all, load_model, save_model
 from service.learning.train import WEIGHTS, TrainConfig, loss_terms, train
@@ -140,7 +140,7 @@ def test_shipped_models_load_and_answer(objective: str) -> None:
     assert objective in manifest["default"]
     stored = load_model(SHIPPED, objective)
     problem, cliques = _problem(small_problem(5))
-    assignment, cost = best_of(
+    best = sample_best(
         stored.model,
         graph_tensors(problem, cliques),
         Decoder(problem, cliques),
@@ -149,6 +149,7 @@ def test_shipped_models_load_and_answer(objective: str) -> None:
         samples=10,
         seed=0,
     )
+    assignment, cost = best.assignment, best.cost
     assert check(problem, cliques, assignment).ok.all()
     assert np.isfinite(cost)
 
