@@ -108,6 +108,11 @@ class Problem:
     tp_node_enter: np.ndarray  # (V,) int
     tp_node_exit: np.ndarray  # (V,) int
     node_index: dict[str, int] = field(repr=False)
+    # Re-scheduling (service.core.progress): all-free / all-unpassed for a fresh problem.
+    realized: np.ndarray  # (M,) bool, decided in the past: no constraint on future times
+    fixed_type: np.ndarray  # (M,) int8, -1 free, 0 exclusive, 1 following (realized ones)
+    tp_planned: np.ndarray  # (P,) float, the request's own time of each point (names it)
+    tp_passed: np.ndarray  # (P,) bool, passed before the re-schedule's time
 
     @property
     def n_robots(self) -> int:
@@ -489,4 +494,8 @@ def _build(
         tp_node_enter=locate(node_robot, node_enter),
         tp_node_exit=locate(node_robot, node_exit),
         node_index=node_index,
+        realized=np.zeros(conf_a.size, dtype=bool),
+        fixed_type=np.full(conf_a.size, -1, dtype=np.int8),
+        tp_planned=tp_time,
+        tp_passed=np.zeros(tp_time.size, dtype=bool),
     )

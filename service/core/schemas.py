@@ -10,7 +10,8 @@ from __future__ import annotations
 
 from typing import Annotated, Literal, get_args
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, with_config
+from typing_extensions import TypedDict
 
 __all__ = [
     "MAX_COUNT",
@@ -25,6 +26,9 @@ __all__ = [
     "ConflictIn",
     "DensityLimitIn",
     "OptionsIn",
+    "PreviousConflictIn",
+    "RobotProgressIn",
+    "ProgressIn",
     "ScheduleRequest",
     "AssignmentOut",
     "NodeTimesOut",
@@ -32,6 +36,9 @@ __all__ = [
     "SolverInfoOut",
     "ChecksOut",
     "CostsOut",
+    "WaitAfterTime",
+    "WaitPointTime",
+    "DependencyTime",
     "ScheduleResponse",
 ]
 
@@ -126,14 +133,47 @@ class OptionsIn(_Strict):
     samples: int | None = Field(default=None, ge=1, le=1000, strict=True)
 
 
+class PreviousConflictIn(_Strict):
+    """One decision of the answer being executed (an ``assignment`` entry of that answer)."""
+
+    model_config = ConfigDict(extra="forbid", populate_by_name=True)
+
+    from_: Id = Field(alias="from")
+    to: Id
+    type: Literal["exclusive", "following"]
+
+
+class RobotProgressIn(_Strict):
+    """How far one robot got: every time point planned at or before ``passed_until`` is
+    passed, and from now on it runs at least ``delay`` seconds behind its planned times."""
+
+    passed_until: Time = 0.0
+    delay: Time = 0.0
+
+
+class ProgressIn(_Strict):
+    """The fleet's state at ``time`` (same clock as the planned times); robots not listed
+    have not started."""
+
+    time: Time
+    robots: dict[Id, RobotProgressIn] = Field(default_factory=dict)
+
+
 class ScheduleRequest(_Strict):
-    """Body of ``POST /v1/schedules``: a coordination skeleton graph to schedule."""
+    """Body of ``POST /v1/schedules``: a coordination skeleton graph to schedule.
+
+    With ``progress`` (and optionally ``previous``, the assignment being executed) it is a
+    re-schedule from ``progress.time`` on: decisions already realized stay fixed, the rest
+    may change (docs/contract.md, Re-scheduling).
+    """
 
     objective: Objective = "avg_completion"
     robots: list[RobotIn] = Field(min_length=1)
     conflicts: list[ConflictIn] = Field(default_factory=list)
     density_limits: list[DensityLimitIn] = Field(default_factory=list)
     options: OptionsIn = Field(default_factory=OptionsIn)
+    previous: list[PreviousConflictIn] | None = None
+    progress: ProgressIn | None = None
 
 
 class AssignmentOut(BaseModel):
@@ -192,6 +232,33 @@ class CostsOut(BaseModel):
     avg_delay: float
 
 
+# Dependency plans are plain dicts (TypedDict): thousands of entries per answer are
+# validated in pydantic-core when the response is assembled.
+@with_config(ConfigDict(extra="forbid"))
+class WaitAfterTime(TypedDict):
+    """Robot ``robot`` must have passed its time point planned at ``time``."""
+
+    robot: Id
+    time: Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
+
+
+@with_config(ConfigDict(extra="forbid"))
+class WaitPointTime(TypedDict):
+    """A time point (planned at ``time``) where a robot may have to wait until every robot
+    of ``after`` has passed its point."""
+
+    time: Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
+    after: list[WaitAfterTime]
+
+
+@with_config(ConfigDict(extra="forbid"))
+class DependencyTime(TypedDict):
+    """One robot's dependency plan, graph form: its wait points in path order."""
+
+    robot: Id
+    waits: list[WaitPointTime]
+
+
 class ScheduleResponse(BaseModel):
     """Body of a successful ``POST /v1/schedules``."""
 
@@ -202,3 +269,4 @@ class ScheduleResponse(BaseModel):
     schedule: list[RobotScheduleOut]
     solver: SolverInfoOut
     checks: ChecksOut
+    dependencies: list[DependencyTime] = Field(default_factory=list)
