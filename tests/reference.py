@@ -87,8 +87,12 @@ def reference_problem(req: dict[str, Any]) -> RefProblem:
     )
 
 
-def least_times(ref: RefProblem, a_first: Any, following: Any) -> list[list[float]] | None:
+def least_times(
+    ref: RefProblem, a_first: Any, following: Any, skip: frozenset[int] = frozenset()
+) -> list[list[float]] | None:
     """Least updated times T~ per robot and time point, or None when they do not exist.
+
+    Conflicts in ``skip`` impose no rule (the realized conflicts of a re-schedule).
 
     Straight fixpoint iteration from T~ = T: raise every time point to what
     each rule demands until nothing changes. Every rule only copies a value
@@ -101,6 +105,8 @@ def least_times(ref: RefProblem, a_first: Any, following: Any) -> list[list[floa
     index = [{t: k for k, t in enumerate(ts)} for ts in T]
     rules = []  # (to robot, to tp, from robot, from tp)
     for c, conf in enumerate(ref.conflicts):
+        if c in skip:
+            continue
         first, second = (0, 1) if a_first[c] else (1, 0)
         nodes = (conf.a, conf.b)
         fr, to = ref.node_robot[nodes[first]], ref.node_robot[nodes[second]]

@@ -24,7 +24,7 @@ __all__ = ["CheckResult", "check", "is_acyclic"]
 class CheckResult:
     """Per-sample results. Shapes: acyclic, density, forced (S,) bool each.
 
-    ``forced``: the assignment agrees with every fixed direction.
+    ``forced``: the assignment agrees with every fixed direction and fixed type.
     """
 
     acyclic: np.ndarray
@@ -53,7 +53,8 @@ def is_acyclic(problem: Problem, first: np.ndarray, second: np.ndarray) -> bool:
 
 
 def check(problem: Problem, cliques: Cliques, assignments: Assignments) -> CheckResult:
-    """Check node-level acyclicity, every clique's following budget and fixed directions."""
+    """Check node-level acyclicity, every clique's following budget, fixed directions and
+    fixed types (the realized conflicts of a re-schedule)."""
     acyclic = np.array(
         [
             is_acyclic(problem, *assignments.from_to(problem, s))
@@ -66,4 +67,7 @@ def check(problem: Problem, cliques: Cliques, assignments: Assignments) -> Check
     fixed = np.flatnonzero(problem.forced)  # (F,)
     wanted = problem.forced[fixed] > 0  # (F,) side a first
     forced = np.all(assignments.a_first[:, fixed] == wanted[None, :], axis=1)  # (S,)
+    typed = np.flatnonzero(problem.fixed_type >= 0)  # (F',)
+    wanted_type = problem.fixed_type[typed] == 1  # (F',) following
+    forced &= np.all(assignments.following[:, typed] == wanted_type[None, :], axis=1)
     return CheckResult(acyclic, density, forced)

@@ -18,7 +18,9 @@ conflict just above its first and shifts the rest of that robot's path by the
 same amount (the robot waits), so ranks stay non-decreasing along every path
 and the fixed first node always comes first. Ranks that already put every
 fixed first node strictly below its second are left as they are; without fixed
-directions nothing runs at all.
+directions nothing runs at all. Fixed types (``Problem.fixed_type``, the
+realized conflicts of a re-schedule) are taken first (following) or never
+(exclusive) by the greedy type choice.
 
 The converse also holds (tested): every acyclic assignment comes from the bids
 ``bids_from_ranks(topological positions)`` and every density-feasible type
@@ -236,7 +238,9 @@ class Decoder:
         Only conflicts scoring above ``threshold`` are candidates (all, if None).
         """
         scores = np.atleast_2d(np.asarray(scores, dtype=np.float64))
-        candidate = ~self._forbidden & ~np.isnan(scores)
+        fixed = self.problem.fixed_type  # (M,) realized types come first, or never
+        scores = np.where(fixed == 1, np.inf, scores)
+        candidate = ~self._forbidden & ~np.isnan(scores) & (fixed != 0)
         if threshold is not None:
             candidate &= scores > threshold
         following = candidate.copy()

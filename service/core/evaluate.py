@@ -165,6 +165,9 @@ class Evaluator:
         self._chain_next = problem.event_next  # (E,)
         self._tp_event = problem.tp_event  # (P,)
         self._build_slots(problem)
+        # (2M,) slots of realized conflicts (re-scheduling): decided in the past, they only
+        # relate passed points and never constrain the future.
+        self._live = ~np.repeat(problem.realized, 2)
         counts = np.diff(problem.tp_start).astype(np.float64)  # (R,) time points per robot
         weights = np.zeros(self.n_events + 1)
         np.add.at(weights, self._tp_event, 1.0 / (counts[tp_robot] * problem.n_robots))
@@ -193,6 +196,7 @@ class Evaluator:
         # Slot 2c is active when b passes first, slot 2c+1 when a does.
         active = np.stack([~assignments.a_first, assignments.a_first], axis=2)
         active = active.reshape(n_samples, 2 * problem.n_conflicts)  # (S, 2M), S may be 0
+        active &= self._live[None, :]
         following = np.repeat(assignments.following, 2, axis=1)  # (S, 2M)
         source = np.where(following, self._src_foll, self._src_excl)  # (S, 2M)
         offset = np.where(following, self._off_foll, self._off_excl)  # (S, 2M)
@@ -220,7 +224,8 @@ class Evaluator:
         offset = np.where(following, self._off_foll[slot], self._off_excl[slot])  # (M,)
         target = delay[self._target[slot]]  # (M,)
         tol = 1e-9 * max(1.0, float(np.abs(self.problem.tp_time).max(initial=0.0)))
-        return (target > tol) & (np.abs(target - delay[source] - offset) <= tol)
+        tight = np.abs(target - delay[source] - offset) <= tol
+        return (target > tol) & tight & ~self.problem.realized
 
     def delays_at(self, evaluation: Evaluation, sample: int, time_points: np.ndarray) -> np.ndarray:
         """Delays D at the given time points of one evaluated sample (same shape)."""

@@ -11,7 +11,9 @@ know whether one more decision keeps the assignment valid:
   every density clique holding it is still under budget;
 * a fixed direction (``Problem.forced``) is never reversed: tabu never flips
   it, and backtracking starts from the fixed arcs already oriented and only
-  chooses the type of a fixed conflict.
+  chooses the type of a fixed conflict;
+* a fixed type (``Problem.fixed_type``, realized conflicts of a re-schedule) is
+  never changed either.
 
 A partial acyclic orientation always extends (at least one direction of a new
 conflict is safe, and exclusive is always allowed); the fixed arcs alone are
@@ -99,7 +101,7 @@ def _moves_feasible(
     graph: tuple,
 ) -> np.ndarray:
     """(K,) bool: which moves keep the assignment valid (see :meth:`OrientationGraph.feasible`)."""
-    budget, cq_start, cq_clique, succ, inc_start, inc_conf, conf_a, conf_b, base = graph
+    budget, cq_start, cq_clique, succ, inc_start, inc_conf, conf_a, conf_b, base, ftype = graph
     n_nodes = succ.size
     seen = np.zeros(n_nodes, dtype=np.bool_)
     stack = np.empty(n_nodes, dtype=np.int64)
@@ -107,9 +109,11 @@ def _moves_feasible(
     n_conf = orient.size
     for i in range(moves.size):
         move = moves[i]
-        if move >= n_conf:  # type flip
+        if move >= n_conf:  # type flip, never of a fixed type
             e = move - n_conf
-            out[i] = following[e] or _budget_left(e, counts, budget, cq_start, cq_clique)
+            out[i] = ftype[e] < 0 and (
+                following[e] or _budget_left(e, counts, budget, cq_start, cq_clique)
+            )
         elif base[move] != UNSET:  # a fixed direction is never reversed
             out[i] = False
         else:  # direction flip: the new arc u -> v must not close a cycle without the old arc
@@ -148,7 +152,7 @@ def _enumerate(
     for k >= 2; type = ``follow_first`` for even k, the other for odd k. A fixed
     conflict stays oriented as ``base`` says (its preferred direction): k < 2 only.
     """
-    budget, cq_start, cq_clique, succ, inc_start, inc_conf, conf_a, conf_b, base = graph
+    budget, cq_start, cq_clique, succ, inc_start, inc_conf, conf_a, conf_b, base, ftype = graph
     n_conf = order.size
     seen = np.zeros(succ.size, dtype=np.bool_)
     stack = np.empty(succ.size, dtype=np.int64)
@@ -168,6 +172,9 @@ def _enumerate(
         while k < last:
             a_first = prefer_a[e] if k < 2 else not prefer_a[e]
             follow = follow_first if k % 2 == 0 else not follow_first
+            if ftype[e] >= 0 and follow != (ftype[e] == 1):  # a fixed type is never changed
+                k += 1
+                continue
             if follow and not (
                 may_follow[e] and _budget_left(e, counts, budget, cq_start, cq_clique)
             ):
@@ -267,6 +274,7 @@ class OrientationGraph:
             self.cliques.budget.astype(np.int64), self.cq_start, self.cq_clique,
             self.succ, self.inc_start, self.inc_conf,
             p.conf_a.astype(np.int64), p.conf_b.astype(np.int64), self.base,
+            p.fixed_type,
         )  # fmt: skip
 
     def feasible(self, a_first: np.ndarray, following: np.ndarray, moves: np.ndarray) -> np.ndarray:

@@ -33,6 +33,7 @@ __all__ = [
     "Problem",
     "ProblemError",
     "forced_arcs",
+    "forced_cycles",
     "problem_from_request",
 ]
 
@@ -393,22 +394,20 @@ def _forced(req: ScheduleRequest) -> np.ndarray:
     return np.array([sign[c.first] for c in req.conflicts], dtype=np.int8)
 
 
-def _check_forced_acyclic(
-    req: ScheduleRequest,
-    node_robot: np.ndarray,
-    conflicts: np.ndarray,
-    first: np.ndarray,
-    second: np.ndarray,
-    errs: _Collector,
-) -> None:
-    """Fixed directions plus path order must leave a DAG; report every fixed arc on a cycle.
+def forced_cycles(
+    node_robot: np.ndarray, conflicts: np.ndarray, first: np.ndarray, second: np.ndarray
+) -> list[list[int]]:
+    """Fixed arcs first -> second (F,) of ``conflicts`` that close a circular wait with path
+    order: one list of conflict indices per cycle (empty when the arcs leave a DAG).
 
     Only the F fixed arcs' endpoints matter: between two of them a cycle can only
     follow a robot's path forward, so the graph is those endpoints, chained in
     path order per robot (node indices increase along paths), plus the fixed
     arcs. A fixed arc lies on a cycle exactly when both ends share a strongly
-    connected component; each such conflict is named with the others of its cycle.
+    connected component.
     """
+    if conflicts.size == 0:
+        return []
     ends = np.unique(np.concatenate([first, second]))  # (U,) sorted node indices
     same = node_robot[ends[1:]] == node_robot[ends[:-1]]
     graph = nx.DiGraph()
@@ -419,14 +418,28 @@ def _check_forced_acyclic(
     }
     comp_first = np.array([component[v] for v in first.tolist()], dtype=np.int64)  # (F,)
     on_cycle = comp_first == np.array([component[v] for v in second.tolist()], dtype=np.int64)
-    for k in np.flatnonzero(on_cycle).tolist():
-        cycle = conflicts[on_cycle & (comp_first == comp_first[k])].tolist()
-        c = req.conflicts[int(conflicts[k])]
-        errs.add(
-            ("conflicts", int(conflicts[k]), "first"),
-            f"fixed directions form a circular wait with the robots' path order: conflicts "
-            f"{cycle} (this one: '{c.a}' and '{c.b}', first '{c.first}')",
-        )
+    return [
+        conflicts[on_cycle & (comp_first == c)].tolist() for c in np.unique(comp_first[on_cycle])
+    ]
+
+
+def _check_forced_acyclic(
+    req: ScheduleRequest,
+    node_robot: np.ndarray,
+    conflicts: np.ndarray,
+    first: np.ndarray,
+    second: np.ndarray,
+    errs: _Collector,
+) -> None:
+    """Fixed directions plus path order must leave a DAG; name every fixed arc on a cycle."""
+    for cycle in forced_cycles(node_robot, conflicts, first, second):
+        for k in cycle:
+            c = req.conflicts[k]
+            errs.add(
+                ("conflicts", k, "first"),
+                f"fixed directions form a circular wait with the robots' path order: conflicts "
+                f"{cycle} (this one: '{c.a}' and '{c.b}', first '{c.first}')",
+            )
 
 
 def _build(

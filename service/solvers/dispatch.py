@@ -15,8 +15,13 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
+import numpy as np
+
+from service.core.assignment import Assignments
 from service.core.check import CheckResult, check
-from service.core.problem import problem_from_request
+from service.core.cliques import Cliques
+from service.core.problem import ErrorItem, Problem, ProblemError, problem_from_request
+from service.core.progress import previous_from_wire, progress_from_wire, residual_problem
 from service.core.schemas import (
     AssignmentOut,
     ChecksOut,
@@ -43,7 +48,14 @@ from service.solvers.registry import SolveContext, SolverOutput, get_solver
 if TYPE_CHECKING:
     from service.learning.store import StoredModel
 
-__all__ = ["FALLBACKS", "LAST_RESORT", "DispatchPolicy", "InvalidAnswerError", "dispatch"]
+__all__ = [
+    "FALLBACKS",
+    "LAST_RESORT",
+    "DispatchPolicy",
+    "InvalidAnswerError",
+    "dispatch",
+    "solve_problem",
+]
 
 log = logging.getLogger(__name__)
 
@@ -86,6 +98,9 @@ def dispatch(
 ) -> ScheduleResponse:
     """Solve ``request`` and return a checked response.
 
+    A request with ``progress`` is a re-schedule: its residual problem
+    (:mod:`service.core.progress`) is solved, warm-started from ``previous``.
+
     Args:
         deadline: ``time.monotonic()`` by which the solver must stop (the request's
             arrival plus its time limit, so time spent queueing counts); the solver gets
@@ -95,6 +110,29 @@ def dispatch(
         ProblemError: the request breaks a cross-field rule of the contract.
     """
     problem = problem_from_request(request)
+    previous = None if request.previous is None else previous_from_wire(problem, request.previous)
+    if request.progress is not None:
+        problem = residual_problem(problem, progress_from_wire(problem, request.progress), previous)
+    return solve_problem(problem, request, policy, deadline=deadline, warm=previous)
+
+
+def solve_problem(
+    problem: Problem,
+    request: ScheduleRequest,
+    policy: DispatchPolicy,
+    *,
+    deadline: float | None = None,
+    warm: Assignments | None = None,
+    cliques: Cliques | None = None,
+) -> ScheduleResponse:
+    """Solve a validated ``problem`` with ``request``'s objective and options.
+
+    Args:
+        warm: a valid assignment to start local search from (the previous answer of a
+            re-schedule); ignored if the checker rejects it.
+        cliques: the problem's cliques if already known (they depend only on the
+            conflict graph and densities, so a re-schedule reuses its base problem's).
+    """
     opts = request.options
     ctx = SolveContext(
         problem=problem,
@@ -105,12 +143,16 @@ def dispatch(
         workers=policy.exact_workers,
         models=policy.models,
     )
+    if cliques is not None:
+        ctx.__dict__["cliques"] = cliques  # the cached property, filled in advance
     name = choose_solver(request, problem.n_conflicts, policy)
     start = time.perf_counter()
     # The cliques first: every solver and the checker need them, and a problem whose
     # cliques exceed the work budget (TooManyCliques) is refused before any solver
     # runs, instead of each solver of the fallback chain failing on it in turn.
-    ctx.cliques  # noqa: B018  (builds the cached cliques)
+    _check_realized_density(problem, ctx.cliques)
+    if warm is not None and check(problem, ctx.cliques, warm).ok[0]:
+        ctx.warm = warm
     used, output, checks = _first_valid_answer(ctx, name)
     runtime = time.perf_counter() - start
     info = SolverInfoOut(
@@ -130,6 +172,30 @@ def dispatch(
         forced=bool(checks.forced[0]),
     )
     return _render(request, ctx, output, info, checked)
+
+
+def _check_realized_density(problem: Problem, cliques: Cliques) -> None:
+    """Realized following-type conflicts of a re-schedule must fit every clique's budget.
+
+    Raises:
+        ProblemError: they do not (the progress reports more robots crowding a place
+            than its density allows), naming ``progress``.
+    """
+    if not problem.realized.any():
+        return
+    counts = cliques.following_counts((problem.fixed_type == 1)[None])[0]  # (Q,)
+    over = np.flatnonzero(counts > cliques.budget)
+    if over.size:
+        raise ProblemError(
+            [
+                ErrorItem(
+                    ("body", "progress"),
+                    f"the past this progress describes has {int(counts[q])} following-type "
+                    f"conflicts in a density clique that allows {int(cliques.budget[q])}",
+                )
+                for q in over[:50].tolist()
+            ]
+        )
 
 
 def _time_left(time_limit_s: float, deadline: float | None) -> float:

@@ -125,7 +125,7 @@ def build_model(problem: Problem, cliques: Cliques, objective: Objective) -> Exa
 
     # Constraints.
     _add_acyclicity(model, problem, a_first)
-    _fix_directions(model, problem, a_first)
+    _fix_directions(model, problem, a_first, following)
     _add_density(model, cliques, following)
     for e, nxt in enumerate(problem.event_next.tolist()):
         if nxt >= 0:
@@ -155,10 +155,15 @@ def _add_acyclicity(model: cp_model.CpModel, problem: Problem, a_first: list) ->
         model.add(pos[a] >= pos[b] + 1).only_enforce_if(a_first[c].Not())
 
 
-def _fix_directions(model: cp_model.CpModel, problem: Problem, a_first: list) -> None:
-    """A fixed direction fixes its conflict's literal (side a first where forced is +1)."""
+def _fix_directions(
+    model: cp_model.CpModel, problem: Problem, a_first: list, following: list
+) -> None:
+    """A fixed direction fixes its conflict's literal (side a first where forced is +1);
+    a fixed type (a realized conflict of a re-schedule) fixes its type literal."""
     for c in problem.forced_arcs[0].tolist():
         model.add(a_first[c] == int(problem.forced[c] > 0))
+    for c in np.flatnonzero(problem.fixed_type >= 0).tolist():
+        model.add(following[c] == int(problem.fixed_type[c]))
 
 
 def _add_density(model: cp_model.CpModel, cliques: Cliques, following: list) -> None:
@@ -185,7 +190,7 @@ def _time_slots(
     tp_event = problem.tp_event
     pe, px = problem.tp_pair_enter, problem.tp_pair_exit
     slots = []
-    for c in range(problem.n_conflicts):
+    for c in np.flatnonzero(~problem.realized).tolist():  # realized: only passed points
         for second in (0, 1):
             first = 1 - second
             first_lit = a_first[c] if first == 0 else a_first[c].Not()

@@ -1,7 +1,8 @@
 """The GNN-VAE refined by local search: the published "Ours*".
 
 ``gnn_vae_refined`` decodes the GNN-VAE's samples, takes the cheapest, and
-runs tabu search (:mod:`service.solvers.tabu`) from it and from FCFS, each
+runs tabu search (:mod:`service.solvers.tabu`) from it and from FCFS (or the
+warm start of a re-schedule, if cheaper), each
 with half of what is left of a 1 s budget (or of the request's time limit, if
 shorter), and returns the best of the two. Two starts because neither wins
 everywhere: on large stitched problems the model's best sample is sometimes
@@ -24,10 +25,9 @@ import time
 
 import numpy as np
 
-from service.solvers.fcfs import fcfs
 from service.solvers.gnn_vae import DEFAULT_SAMPLES, sample_model
 from service.solvers.registry import SolveContext, SolverOutput, register
-from service.solvers.tabu import tabu_search
+from service.solvers.tabu import plain_start, tabu_search
 
 __all__ = ["REFINE_SECONDS", "gnn_vae_refined"]
 
@@ -47,7 +47,7 @@ def gnn_vae_refined(ctx: SolveContext) -> SolverOutput | None:
     # The samples get at most half the budget; tabu the rest.
     sampled = sample_model(ctx, stored, samples, time.monotonic() + budget / 2)
     best, best_cost, iterations = sampled.assignment, np.inf, 0
-    for k, tabu_start in enumerate((sampled.assignment, fcfs(ctx).assignment)):
+    for k, tabu_start in enumerate((sampled.assignment, plain_start(ctx))):
         left = (budget - (time.perf_counter() - start)) / (2 - k)  # half now, the rest next
         found, cost, runs = tabu_search(ctx, tabu_start, budget_s=max(left, 0.0))
         iterations += runs

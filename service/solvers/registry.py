@@ -42,6 +42,8 @@ class SolveContext:
     # Sees every improving solution of an anytime solver (CP-SAT) as (wall s, assignment):
     # lets a benchmark measure how fast a method reaches a cost. None in the service.
     on_solution: Callable[[float, Assignments], None] | None = None
+    # A valid assignment to start local search from: the previous answer of a re-schedule.
+    warm: Assignments | None = None
 
     @cached_property
     def cliques(self) -> Cliques:

@@ -93,7 +93,8 @@ def tabu_search(
     graph = ctx.orientation
     evaluate = ctx.evaluator.evaluate
     n_moves = 2 * ctx.problem.n_conflicts
-    movable = np.concatenate([ctx.problem.forced == 0, np.ones(n_moves // 2, dtype=bool)])  # (2M,)
+    p = ctx.problem
+    movable = np.concatenate([p.forced == 0, p.fixed_type < 0])  # (2M,) flips, then type moves
     current = best = start
     evaluation = evaluate(start)
     best_cost = float(evaluation.costs[ctx.objective][0])
@@ -125,8 +126,21 @@ def tabu_search(
     return best, best_cost, it
 
 
+def plain_start(ctx: SolveContext) -> Assignments:
+    """Where a search starts without a model: FCFS, or the warm start (the previous answer
+    of a re-schedule) when that is cheaper."""
+    start = fcfs(ctx).assignment
+    if ctx.warm is None:
+        return start
+    both = Assignments(
+        np.concatenate([start.a_first, ctx.warm.a_first]),
+        np.concatenate([start.following, ctx.warm.following]),
+    )
+    return both.take(int(np.argmin(ctx.evaluator.evaluate(both).costs[ctx.objective])))
+
+
 @register("tabu")
 def tabu(ctx: SolveContext) -> SolverOutput:
-    """Tabu search from the FCFS assignment within the request's time limit."""
-    best, _, iterations = tabu_search(ctx, fcfs(ctx).assignment)
+    """Tabu search from FCFS (or the warm start, if cheaper) within the request's time limit."""
+    best, _, iterations = tabu_search(ctx, plain_start(ctx))
     return SolverOutput(best, detail=f"{iterations} tabu iterations")

@@ -1,0 +1,292 @@
+"""Re-scheduling from the fleet's progress: the residual problem from ``progress.time`` on.
+
+A request may carry the assignment being executed (``previous``) and how far each
+robot got (``progress``). The residual problem is the same graph (same nodes,
+conflicts and time points, so every solver, the evaluator and the checker work
+on it unchanged) with three things changed:
+
+* **times**: robot r has passed its time points planned at or before
+  ``passed_until``; those keep their planned time shifted by
+  ``a_r = min(delay_r, time - p_r)`` (``p_r`` the last passed point: an estimate
+  of when they were passed, never after ``time``); every other point is shifted by
+  ``u_r = max(delay_r, time - T_r(first unpassed))``: the robot runs at least
+  ``delay`` late and cannot reach a point before ``time``. Both shifts keep each
+  robot's times strictly increasing and its delay never decreasing (a_r <= u_r).
+* **settled directions**: once a robot has passed its pair enter of a conflict
+  it went first: the conflict's direction is fixed (``Problem.forced``). With
+  ``previous`` the direction must agree with it (else the progress contradicts
+  the plan being executed: 422).
+* **realized conflicts**: both robots passed their pair enter: the decision lies
+  in the past. Its direction and type are fixed (``previous``'s, else read off
+  the estimated times) and its constraint, which only concerns passed points, is
+  dropped (``Problem.realized``); it still counts for acyclicity and density.
+
+Costs of the residual problem are the completion times from the shifted plan on
+(absolute times, the same clock as ``progress.time``); ``avg_delay`` is measured
+against the shifted plan. Points are named by their planned time
+(``Problem.tp_planned``) in the dependency plan.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from service.core.assignment import Assignments
+from service.core.problem import (
+    ErrorItem,
+    Loc,
+    Problem,
+    ProblemError,
+    forced_arcs,
+    forced_cycles,
+)
+from service.core.schemas import PreviousConflictIn, ProgressIn
+
+__all__ = ["Progress", "previous_from_wire", "progress_from_wire", "residual_problem"]
+
+
+@dataclass(frozen=True, eq=False)
+class Progress:
+    """How far each robot got at ``time``. Shapes: R robots.
+
+    ``passed_until`` is -inf for a robot that has not started.
+    """
+
+    time: float
+    passed_until: np.ndarray  # (R,) float
+    delay: np.ndarray  # (R,) float >= 0
+
+
+def _error(loc: Loc, msg: str) -> ErrorItem:
+    return ErrorItem(("body", *loc), msg)
+
+
+def progress_from_wire(problem: Problem, wire: ProgressIn) -> Progress:
+    """Arrays of ``wire``; unknown robots and points passed after ``time`` are a 422.
+
+    Raises:
+        ProblemError: naming ``progress.robots.<id>`` (or its ``passed_until``).
+    """
+    robot_index = {rid: r for r, rid in enumerate(problem.robot_ids)}
+    passed = np.full(problem.n_robots, -np.inf)
+    delay = np.zeros(problem.n_robots)
+    errors: list[ErrorItem] = []
+    for rid, rp in wire.robots.items():
+        r = robot_index.get(rid)
+        if r is None:
+            errors.append(_error(("progress", "robots", rid), f"unknown robot id '{rid}'"))
+            continue
+        passed[r], delay[r] = rp.passed_until, rp.delay
+        times = problem.tp_time[problem.tp_start[r] : problem.tp_start[r + 1]]  # (C_r,)
+        late = times[(times > wire.time) & (times <= rp.passed_until)]
+        if late.size:
+            errors.append(
+                _error(
+                    ("progress", "robots", rid, "passed_until"),
+                    f"robot '{rid}' is said to have passed its point planned at {late[0]}, "
+                    f"after progress.time ({wire.time}); robots are never early",
+                )
+            )
+    if errors:
+        raise ProblemError(errors)
+    return Progress(float(wire.time), passed, delay)
+
+
+def previous_from_wire(problem: Problem, wire: list[PreviousConflictIn]) -> Assignments:
+    """The previous answer's assignment: every conflict decided exactly once, else a 422.
+
+    Raises:
+        ProblemError: naming ``previous.<i>`` (unknown node, no such conflict, a
+            conflict decided twice, a fixed direction reversed) or ``previous``
+            (conflicts left undecided).
+    """
+    pair_index = {
+        (int(a), int(b)): m
+        for m, (a, b) in enumerate(zip(problem.conf_a, problem.conf_b, strict=True))
+    }
+    a_first = np.zeros(problem.n_conflicts, dtype=bool)
+    following = np.zeros(problem.n_conflicts, dtype=bool)
+    seen = np.full(problem.n_conflicts, -1, dtype=np.int64)
+    errors: list[ErrorItem] = []
+    for i, entry in enumerate(wire):
+        names = {"from": entry.from_, "to": entry.to}
+        ends = {side: problem.node_index.get(name) for side, name in names.items()}
+        for side, v in ends.items():
+            if v is None:
+                errors.append(_error(("previous", i, side), f"unknown node id '{names[side]}'"))
+        u, v = ends["from"], ends["to"]
+        if u is None or v is None:
+            continue
+        m = pair_index.get((u, v), pair_index.get((v, u)))
+        if m is None:
+            errors.append(
+                _error(("previous", i), f"no conflict joins '{entry.from_}' and '{entry.to}'")
+            )
+            continue
+        if seen[m] >= 0:
+            errors.append(
+                _error(("previous", i), f"conflict {m} is decided twice (also {seen[m]})")
+            )
+            continue
+        seen[m] = i
+        a_first[m] = u == problem.conf_a[m]
+        following[m] = entry.type == "following"
+        if problem.forced[m] and a_first[m] != (problem.forced[m] > 0):
+            errors.append(_error(("previous", i), f"reverses the fixed direction of conflict {m}"))
+    undecided = np.flatnonzero(seen < 0)
+    if undecided.size and not errors:
+        errors.append(
+            _error(
+                ("previous",),
+                f"not an assignment of this problem: {undecided.size} conflicts undecided "
+                f"(first: conflict {int(undecided[0])})",
+            )
+        )
+    if errors:
+        raise ProblemError(errors[:50])
+    return Assignments.single(a_first, following)
+
+
+def _shifts(problem: Problem, progress: Progress) -> tuple[np.ndarray, np.ndarray]:
+    """(P,) shifted times and (P,) passed flags of every time point."""
+    tp_robot = problem.tp_robot
+    times = problem.tp_time  # (P,)
+    passed = times <= progress.passed_until[tp_robot]  # (P,)
+    n_robots = problem.n_robots
+    last_passed = np.full(n_robots, -np.inf)
+    np.maximum.at(last_passed, tp_robot[passed], times[passed])
+    first_open = np.full(n_robots, np.inf)
+    np.minimum.at(first_open, tp_robot[~passed], times[~passed])
+    t, d = progress.time, progress.delay
+    with np.errstate(invalid="ignore"):  # inf - inf where a robot passed all or nothing
+        done_shift = np.minimum(d, t - last_passed)  # (R,)
+        open_shift = np.maximum(d, t - first_open)  # (R,)
+    shift = np.where(passed, done_shift[tp_robot], open_shift[tp_robot])  # (P,)
+    return times + shift, passed
+
+
+def residual_problem(problem: Problem, progress: Progress, previous: Assignments | None) -> Problem:
+    """The problem from ``progress.time`` on (see the module docstring).
+
+    Raises:
+        ProblemError: the progress contradicts ``previous`` or a fixed direction.
+    """
+    tp_time, tp_passed = _shifts(problem, progress)
+    entered = tp_passed[problem.tp_pair_enter]  # (M, 2) side passed its pair enter
+    realized = entered.all(axis=1)  # (M,)
+    a_first, following = _settled(problem, tp_time, tp_passed, realized, previous)
+    forced = problem.forced.copy()
+    one = entered.any(axis=1) & ~realized
+    settled = np.where(entered[:, 0], 1, -1).astype(np.int8)  # who entered goes first
+    _check_agrees(problem, forced, one, settled, previous)
+    forced[one] = settled[one]
+    forced[realized] = np.where(a_first[realized], 1, -1)
+    fixed_type = np.where(realized, following.astype(np.int8), -1).astype(np.int8)
+    _check_acyclic(problem, forced)
+    return replace(
+        problem,
+        tp_time=tp_time,
+        node_enter=tp_time[problem.tp_node_enter],
+        node_exit=tp_time[problem.tp_node_exit],
+        pair_enter=tp_time[problem.tp_pair_enter],
+        pair_exit=tp_time[problem.tp_pair_exit],
+        goal_time=np.where(np.isnan(problem.goal_time), np.nan, tp_time[problem.last_tp]),
+        forced=forced,
+        realized=realized,
+        fixed_type=fixed_type,
+        tp_planned=problem.tp_planned,
+        tp_passed=tp_passed,
+    )
+
+
+def _settled(
+    problem: Problem,
+    tp_time: np.ndarray,
+    tp_passed: np.ndarray,
+    realized: np.ndarray,
+    previous: Assignments | None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(M,) direction and type of every conflict as far as the past decides them.
+
+    Realized conflicts take ``previous``'s decision; without it, the side whose pair
+    enter came first (estimated times) went first, and the conflict was following
+    exactly when the second entered before the first had left.
+    """
+    if previous is not None:
+        a_first, following = previous.a_first[0].copy(), previous.following[0].copy()
+        _check_realized(problem, tp_passed, realized, a_first, following)
+        return a_first, following
+    enter = tp_time[problem.tp_pair_enter]  # (M, 2)
+    a_first = enter[:, 0] <= enter[:, 1]
+    first = np.where(a_first, 0, 1)
+    rows = np.arange(problem.n_conflicts)
+    first_left = tp_passed[problem.tp_pair_exit[rows, first]] & (
+        tp_time[problem.tp_pair_exit[rows, first]] <= enter[rows, 1 - first]
+    )
+    return a_first, ~first_left
+
+
+def _check_realized(
+    problem: Problem,
+    tp_passed: np.ndarray,
+    realized: np.ndarray,
+    a_first: np.ndarray,
+    following: np.ndarray,
+) -> None:
+    """A realized exclusive conflict: its first robot must have passed its pair exit."""
+    rows = np.arange(problem.n_conflicts)
+    first = np.where(a_first, 0, 1)
+    left = tp_passed[problem.tp_pair_exit[rows, first]]
+    bad = np.flatnonzero(realized & ~following & ~left)
+    if bad.size:
+        raise ProblemError([_contradiction(problem, m, 1 - first[m], "left it") for m in bad[:50]])
+
+
+def _check_agrees(
+    problem: Problem,
+    forced: np.ndarray,
+    one: np.ndarray,
+    settled: np.ndarray,
+    previous: Assignments | None,
+) -> None:
+    """Where one robot entered first, ``previous`` and fixed directions must say so too."""
+    bad = one & (forced != 0) & (forced != settled)
+    if previous is not None:
+        prev = np.where(previous.a_first[0], 1, -1)
+        bad |= one & (prev != settled)
+    if bad.any():
+        errors = [
+            _contradiction(problem, m, 0 if settled[m] > 0 else 1, "entered")
+            for m in np.flatnonzero(bad)[:50].tolist()
+        ]
+        raise ProblemError(errors)
+
+
+def _contradiction(problem: Problem, m: int, side: int, what: str) -> ErrorItem:
+    """The error naming the robot that passed a conflict's entry out of turn."""
+    nodes = (problem.conf_a[m], problem.conf_b[m])
+    robot = problem.robot_ids[problem.node_robot[nodes[side]]]
+    other = problem.robot_ids[problem.node_robot[nodes[1 - side]]]
+    return _error(
+        ("progress", "robots", robot, "passed_until"),
+        f"robot '{robot}' passed the entry of conflict {m} ('{problem.node_ids[nodes[side]]}') "
+        f"before robot '{other}' {what}, against the order being executed "
+        "(previous, or the conflict's fixed first)",
+    )
+
+
+def _check_acyclic(problem: Problem, forced: np.ndarray) -> None:
+    """Directions settled by the past cannot form a circular wait unless progress is wrong."""
+    cycles = forced_cycles(problem.node_robot, *forced_arcs(problem.conf_a, problem.conf_b, forced))
+    if cycles:
+        raise ProblemError(
+            [
+                _error(
+                    ("progress",),
+                    f"the orders this progress settles form a circular wait: conflicts {c}",
+                )
+                for c in cycles[:50]
+            ]
+        )
