@@ -1,7 +1,10 @@
 """The one constraint checker: every answer of every solver passes through it.
 
-It is deliberately independent of the decoder: acyclicity is checked by a
-topological sort (stdlib ``graphlib``) of the node graph, density by counting
+It is deliberately independent of the decoder: acyclicity is checked by the
+strongly connected components of the node graph (scipy's compiled Pearce
+algorithm: a directed graph without self-loops is a DAG exactly when every
+component is a single node; graphlib's pure-Python sort took 50 ms at 250 robots
+and 22,000 conflicts, this takes well under 1 ms), density by counting
 following-type conflicts per clique, and fixed directions by comparing each
 fixed conflict's direction with its ``first``.
 """
@@ -9,12 +12,12 @@ fixed conflict's direction with its ``first``.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from graphlib import CycleError, TopologicalSorter
 
 import numpy as np
 
 from service.core.assignment import Assignments
 from service.core.cliques import Cliques
+from service.core.digraph import is_dag, path_arcs
 from service.core.problem import Problem
 
 __all__ = ["CheckResult", "check", "is_acyclic"]
@@ -39,17 +42,7 @@ class CheckResult:
 
 def is_acyclic(problem: Problem, first: np.ndarray, second: np.ndarray) -> bool:
     """True when path order plus the conflict arcs first -> second (M,) form a DAG."""
-    graph: dict[int, set[int]] = {v: set() for v in range(problem.n_nodes)}
-    chain = np.flatnonzero(problem.node_robot[1:] == problem.node_robot[:-1])
-    for v in chain.tolist():
-        graph[v + 1].add(v)
-    for u, v in zip(first.tolist(), second.tolist(), strict=True):
-        graph[v].add(u)
-    try:
-        tuple(TopologicalSorter(graph).static_order())
-    except CycleError:
-        return False
-    return True
+    return is_dag(problem.n_nodes, *path_arcs(problem.node_robot), first, second)
 
 
 def check(problem: Problem, cliques: Cliques, assignments: Assignments) -> CheckResult:

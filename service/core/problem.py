@@ -22,9 +22,9 @@ from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Any
 
-import networkx as nx
 import numpy as np
 
+from service.core.digraph import components
 from service.core.schemas import ScheduleRequest
 
 __all__ = [
@@ -410,16 +410,13 @@ def forced_cycles(
         return []
     ends = np.unique(np.concatenate([first, second]))  # (U,) sorted node indices
     same = node_robot[ends[1:]] == node_robot[ends[:-1]]
-    graph = nx.DiGraph()
-    graph.add_edges_from(zip(ends[:-1][same].tolist(), ends[1:][same].tolist(), strict=True))
-    graph.add_edges_from(zip(first.tolist(), second.tolist(), strict=True))
-    component = {
-        v: i for i, nodes in enumerate(nx.strongly_connected_components(graph)) for v in nodes
-    }
-    comp_first = np.array([component[v] for v in first.tolist()], dtype=np.int64)  # (F,)
-    on_cycle = comp_first == np.array([component[v] for v in second.tolist()], dtype=np.int64)
+    chain = np.flatnonzero(same)  # path arcs ends[k] -> ends[k+1], as positions in ends
+    first_at, second_at = np.searchsorted(ends, first), np.searchsorted(ends, second)
+    _, label = components(ends.size, chain, chain + 1, first_at, second_at)
+    on_cycle = label[first_at] == label[second_at]  # (F,)
     return [
-        conflicts[on_cycle & (comp_first == c)].tolist() for c in np.unique(comp_first[on_cycle])
+        conflicts[on_cycle & (label[first_at] == c)].tolist()
+        for c in np.unique(label[first_at][on_cycle])
     ]
 
 

@@ -176,14 +176,13 @@ class ScheduleRequest(_Strict):
     progress: ProgressIn | None = None
 
 
-class AssignmentOut(BaseModel):
-    """The decision for one conflict: who passes first, and how."""
-
-    model_config = ConfigDict(populate_by_name=True)
-
-    from_: str = Field(alias="from")
-    to: str
-    type: Literal["exclusive", "following"]
+# The decision for one conflict: who passes first (``from``), and how. A TypedDict (the
+# key ``from`` is a keyword, hence the functional form): a 250-robot answer has ~20,000
+# of them, validated in pydantic-core in 6 ms where models took 56 ms.
+AssignmentOut = TypedDict(
+    "AssignmentOut",
+    {"from": str, "to": str, "type": Literal["exclusive", "following"]},
+)
 
 
 class NodeTimesOut(BaseModel):

@@ -116,7 +116,7 @@ def plan_paths(
         solve_due = max(due - MOTION_SHARE * limit, time.monotonic() + MIN_SOLVE_S)
         answer = dispatch(graph_request, policy, deadline=solve_due)
     solve_done = time.perf_counter()
-    executed = _execute_safely(graph, _decision(graph, answer))
+    executed = _execute_safely(graph, decision(graph, answer))
     response = _render(request, graph, graph_request, answer, executed, solve_done - graph_done)
     # Motion: everything after the solve, building this answer included.
     response.timings = TimingsOut(
@@ -127,19 +127,19 @@ def plan_paths(
     return response
 
 
-def _decision(graph: CoordinationGraph, answer: ScheduleResponse | None) -> Decision:
+def decision(graph: CoordinationGraph, answer: ScheduleResponse | None) -> Decision:
     """The dispatcher's assignment (in the graph's conflict order) as arrays."""
     if answer is None:
         return Decision(np.zeros(0, dtype=bool), np.zeros(0, dtype=bool))
     ids = graph.node_ids()
     a_first = np.array(
         [
-            ids[a] == out.from_
+            ids[a] == out["from"]
             for out, a in zip(answer.assignment, graph.conf_node[:, 0], strict=True)
         ],
         dtype=bool,
     )
-    following = np.array([out.type == "following" for out in answer.assignment], dtype=bool)
+    following = np.array([out["type"] == "following" for out in answer.assignment], dtype=bool)
     return Decision(a_first, following)
 
 
@@ -249,7 +249,7 @@ def _assignment(graph: CoordinationGraph, decision: Decision) -> list[Assignment
     for m, (a, b) in enumerate(graph.conf_node.tolist()):
         first, second = (a, b) if decision.a_first[m] else (b, a)
         kind = "following" if decision.following[m] else "exclusive"
-        out.append(AssignmentOut(from_=ids[first], to=ids[second], type=kind))
+        out.append({"from": ids[first], "to": ids[second], "type": kind})
     return out
 
 
@@ -271,4 +271,4 @@ def _solver_info(
 
 
 def _decision_types(answer: ScheduleResponse) -> np.ndarray:
-    return np.array([out.type == "following" for out in answer.assignment], dtype=bool)
+    return np.array([out["type"] == "following" for out in answer.assignment], dtype=bool)

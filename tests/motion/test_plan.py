@@ -78,7 +78,7 @@ def _assert_exclusive_matches(out: PathsScheduleResponse, *, equal: bool) -> Non
     twice waits at each meeting). ``equal``: exactly what the evaluator says (one
     meeting per conflict), and so are the costs when no robot is isolated.
     """
-    assert all(a.type == "exclusive" for a in out.assignment)
+    assert all(a["type"] == "exclusive" for a in out.assignment)
     expected, costs = evaluated(out)
     got = _completions(out)
     for rid, value in expected.items():
@@ -114,9 +114,9 @@ def test_every_answer_moves_without_collision(
         event("refused: robots parked in each other's way")
         _assert_parked_refusal_justified(req, err)
         return
-    event(f"planned, following: {any(a.type == 'following' for a in out.assignment)}")
+    event(f"planned, following: {any(a['type'] == 'following' for a in out.assignment)}")
     assert_motion_valid(req, out)
-    if out.graph is not None and all(a.type == "exclusive" for a in out.assignment):
+    if out.graph is not None and all(a["type"] == "exclusive" for a in out.assignment):
         _assert_exclusive_matches(out, equal=False)
 
 
@@ -147,7 +147,7 @@ def test_any_acyclic_directions_with_any_types_execute_safely(
     ids = graph.node_ids()
     a_first = np.array(
         [
-            ids[a] == out.from_
+            ids[a] == out["from"]
             for out, a in zip(answer.assignment, graph.conf_node[:, 0], strict=True)
         ]
     )
@@ -168,7 +168,7 @@ def test_scenario_moves_without_collision(name: str, solver: str) -> None:
     req = request(SCENARIOS[name](), solver=solver)
     out = plan(req)
     assert_motion_valid(req, out)
-    if all(a.type == "exclusive" for a in out.assignment):
+    if all(a["type"] == "exclusive" for a in out.assignment):
         _assert_exclusive_matches(out, equal=True)
 
 
@@ -192,7 +192,7 @@ def test_scenario_far_from_time_zero(name: str) -> None:
     req = request(_shifted(SCENARIOS[name](), 1e6), solver="fcfs")
     out = plan(req)
     assert_motion_valid(req, out)
-    if all(a.type == "exclusive" for a in out.assignment):
+    if all(a["type"] == "exclusive" for a in out.assignment):
         _assert_exclusive_matches(out, equal=True)
 
 
@@ -208,7 +208,7 @@ def _xs(req: PathsRequest, out: PathsScheduleResponse, times: np.ndarray) -> np.
 def test_a_faster_follower_stays_behind() -> None:
     req = request(SCENARIOS["faster_follower"]())
     out = plan(req)
-    assert [a.type for a in out.assignment] == ["following"]
+    assert [a["type"] for a in out.assignment] == ["following"]
     done = _completions(out)
     assert done["lead"] == 40.0  # the leader is never held up
     assert done["fast"] > done["lead"]  # the follower cannot pass it
@@ -247,7 +247,7 @@ def test_a_robot_parked_at_its_start_goes_first() -> None:
     req = request(SCENARIOS["parked_start"]())
     out = plan(req)
     assert out.graph is not None and out.graph.conflicts[0].first == "b"
-    assert out.assignment[0].from_ == "parked/0"
+    assert out.assignment[0]["from"] == "parked/0"
     done = _completions(out)
     assert done["parked"] == pytest.approx(13.7)  # never waits
     reach = 0.85
@@ -260,7 +260,7 @@ def test_a_robot_parked_at_its_start_goes_first() -> None:
 def test_head_on_traffic_waits_outside_the_corridor() -> None:
     req = request(SCENARIOS["head_on"]())
     out = plan(req)
-    assert [a.type for a in out.assignment] == ["exclusive"]
+    assert [a["type"] for a in out.assignment] == ["exclusive"]
     done = _completions(out)
     times = np.arange(0.0, max(done.values()), 0.01)
     east, west = _xs(req, out, times)
@@ -313,10 +313,10 @@ def _decision_of(req: PathsRequest, out: PathsScheduleResponse) -> Decision:
     graph = build_graph(paths_of(req), GeometrySettings())
     ids = graph.node_ids()
     a_first = np.array(
-        [ids[a] == x.from_ for x, a in zip(out.assignment, graph.conf_node[:, 0], strict=True)],
+        [ids[a] == x["from"] for x, a in zip(out.assignment, graph.conf_node[:, 0], strict=True)],
         dtype=bool,
     )
-    following = np.array([x.type == "following" for x in out.assignment], dtype=bool)
+    following = np.array([x["type"] == "following" for x in out.assignment], dtype=bool)
     return Decision(a_first, following)
 
 

@@ -243,9 +243,9 @@ def evaluated(out: PathsScheduleResponse) -> tuple[dict[str, float], dict[str, f
     robot of the graph its completion, and the four costs."""
     assert out.graph is not None
     a_first = np.array(
-        [a.from_ == c.a for a, c in zip(out.assignment, out.graph.conflicts, strict=True)]
+        [a["from"] == c.a for a, c in zip(out.assignment, out.graph.conflicts, strict=True)]
     )
-    following = np.array([a.type == "following" for a in out.assignment], dtype=bool)
+    following = np.array([a["type"] == "following" for a in out.assignment], dtype=bool)
     problem = problem_from_request(out.graph)
     evaluation = Evaluator(problem).evaluate(Assignments.single(a_first, following))
     completion = evaluation.completion[0].tolist()

@@ -35,10 +35,10 @@ def test_exact_response_matches_reference(objective: str) -> None:
     a_first = [False] * len(ref.conflicts)
     following = [False] * len(ref.conflicts)
     for out in response.assignment:
-        k = index.get(out.from_ + "|" + out.to, index.get(out.to + "|" + out.from_))
+        k = index.get(out["from"] + "|" + out["to"], index.get(out["to"] + "|" + out["from"]))
         assert k is not None
-        a_first[k] = ref.conflicts[k].a == out.from_
-        following[k] = out.type == "following"
+        a_first[k] = ref.conflicts[k].a == out["from"]
+        following[k] = out["type"] == "following"
     times = least_times(ref, a_first, following)
     want = costs(ref, times)
     assert response.cost == pytest.approx(want[objective], rel=1e-9)
