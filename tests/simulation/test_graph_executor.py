@@ -22,6 +22,7 @@ from service.core.decode import Decoder
 from service.core.dependency_plan import dependency_plan, wait_constraints
 from service.core.evaluate import Evaluator
 from service.core.problem import Problem, ProblemError, problem_from_request
+from service.core.progress import Progress, residual_problem
 from service.core.schemas import ScheduleRequest
 from service.learning.generate import small_problem, stitched_problem
 from service.simulation.disturbances import Rate
@@ -150,6 +151,12 @@ def _disturbances(problem: Problem, draw: int) -> list[Rate]:
     return rates
 
 
+def _least(problem: Problem, evaluator: Evaluator, assignments: Assignments) -> np.ndarray:
+    """(P,) the evaluator's least updated time of every time point."""
+    evaluation = evaluator.evaluate(assignments)
+    return problem.tp_time + evaluator.delays_at(evaluation, 0, np.arange(problem.tp_time.size))
+
+
 KINDS = st.sampled_from(["tiny", "small", "stitched"])
 SEEDS = st.integers(0, 200)
 DRAWS = st.integers(0, 2**32 - 1)
@@ -171,10 +178,9 @@ def test_the_wire_names_the_planned_points(kind: str, seed: int, draw: int) -> N
 def test_undisturbed_times_are_the_least_updated_times(kind: str, seed: int, draw: int) -> None:
     problem, evaluator, assignments = _valid(kind, seed, draw)
     run = _run(problem, assignments)
-    evaluation = evaluator.evaluate(assignments)
-    least = problem.tp_time + evaluator.delays_at(evaluation, 0, np.arange(problem.tp_time.size))
-    np.testing.assert_allclose(run.passed, least, rtol=1e-9, atol=0)
-    np.testing.assert_allclose(run.completion, evaluation.completion[0], rtol=1e-9, atol=0)
+    np.testing.assert_allclose(
+        run.passed, _least(problem, evaluator, assignments), rtol=1e-9, atol=0
+    )
     assert run.deadlocked == ()
 
 
@@ -192,3 +198,25 @@ def test_disturbed_runs_keep_every_dependency(kind: str, seed: int, draw: int) -
     step = np.diff(run.passed)[np.diff(problem.tp_robot) == 0]
     planned = np.diff(problem.tp_time)[np.diff(problem.tp_robot) == 0]
     assert np.all(step >= planned * (1 - 1e-9))
+
+
+@settings(max_examples=30, deadline=None, derandomize=True)
+@given(kind=KINDS, seed=SEEDS, draw=DRAWS, moment=st.floats(0.0, 1.0))
+def test_a_reschedule_plan_runs_at_the_residual_least_times(
+    kind: str, seed: int, draw: int, moment: float
+) -> None:
+    """Stopped at a moment of its undisturbed run, the fleet re-schedules with the same
+    assignment: the plan leaves out the past, and executing it gives the residual times."""
+    problem, evaluator, assignments = _valid(kind, seed, draw)
+    least = _least(problem, evaluator, assignments)
+    now = float(np.quantile(least, moment))
+    passed_until = np.full(problem.n_robots, -np.inf)
+    done = least <= now
+    np.maximum.at(passed_until, problem.tp_robot[done], problem.tp_time[done])
+    progress = Progress(now, passed_until, np.zeros(problem.n_robots))
+    residual = residual_problem(problem, progress, assignments)
+    plan = plan_from_wire(residual, dependency_plan(residual, assignments))
+    assert not residual.tp_passed[plan.wait].any() and not residual.tp_passed[plan.until].any()
+    run = execute_plan(residual, plan)
+    want = _least(residual, Evaluator(residual), assignments)
+    np.testing.assert_allclose(run.passed, want, rtol=1e-9, atol=0)
