@@ -11,6 +11,11 @@ reaching a wait point, a release threshold or its goal.
 
 Executing a plan built from an acyclic schedule never deadlocks (docs/paths.md);
 should it happen anyway, the run reports the robots that never finished.
+
+A run can be paused at a wall time (:meth:`Execution.advance` returns each
+robot's :class:`State`) and continued under another plan
+(:meth:`Execution.replace_plan`): what re-scheduling while robots move needs.
+Constraints of the new plan whose waiter is already past its wait point are moot.
 """
 
 from __future__ import annotations
@@ -24,7 +29,7 @@ import numpy as np
 from service.geometry.paths import RobotPath
 from service.simulation.disturbances import Rate
 
-__all__ = ["DependencyPlan", "Run", "execute"]
+__all__ = ["DependencyPlan", "Execution", "Run", "State", "execute"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -63,15 +68,44 @@ class Run:
         return [p.arc_at(c) for p, c in zip(paths, self.clock, strict=True)]
 
 
-class _Executor:
-    """State of one run; :func:`execute` is the public entry."""
+@dataclass(frozen=True, eq=False)
+class State:
+    """Where every robot stands at wall time ``time`` of a paused run. Shapes: R robots.
 
-    def __init__(self, paths: Sequence[RobotPath], plan: DependencyPlan, rates: Sequence[Rate]):
+    ``clock`` is each robot's progress clock, the planned time of where it is (its
+    start time before it starts, its finish time once done).
+    """
+
+    time: float
+    clock: np.ndarray  # (R,) float
+    started: np.ndarray  # (R,) bool, its start time has come (present on the floor)
+    done: np.ndarray  # (R,) bool, at its last point
+    completion: np.ndarray  # (R,) wall time at the last point; NaN while not done
+
+    def arcs(self, paths: Sequence[RobotPath]) -> np.ndarray:
+        """(R,) arc length where each robot stands."""
+        return np.array([p.arc_at(c) for p, c in zip(paths, self.clock.tolist(), strict=True)])
+
+
+class Execution:
+    """One run that can be paused at a wall time and continued under another plan.
+
+    ``execute(paths, plan, rates)`` is ``Execution(paths, plan, rates).finish()``.
+    Re-scheduling pauses the run (:meth:`advance`), reads the :class:`State`, and
+    continues from that state with a new plan (:meth:`replace_plan`); disturbances
+    (``rates``) belong to the world and stay.
+    """
+
+    def __init__(
+        self, paths: Sequence[RobotPath], plan: DependencyPlan, rates: Sequence[Rate] | None = None
+    ):
         # State lives in Python lists: the event loop reads single entries, where numpy
         # scalar indexing measured several times slower.
-        self.paths, self.plan, self.rates = paths, plan, rates
+        self.paths = paths
+        self.rates = list(rates) if rates is not None else [Rate()] * len(paths)
         n = len(paths)
-        self.finish = [p.finish_time for p in paths]
+        self.now = -np.inf  # wall time the run has been advanced to
+        self.finish_clock = [p.finish_time for p in paths]
         self.clock = [p.start_time for p in paths]  # progress clock at self.wall
         self.wall = list(self.clock)
         self.moving = [False] * n
@@ -81,35 +115,86 @@ class _Executor:
         self.target = list(self.clock)  # progress clock of each moving robot's next event
         self.records: list[list[tuple[float, float]]] = [[] for _ in range(n)]
         self.completion = [float("nan")] * n
-        self.satisfied = [False] * plan.size
-        self.waiter = plan.waiter.tolist()
-        wait_clock = _on_clock(paths, plan.waiter, plan.wait_s)  # (D,)
-        until_clock = _on_clock(paths, plan.waitee, plan.until_s)  # (D,)
+        self.events: list[tuple[float, int, int, int, float]] = []
+        self.seq = 0
+        self._load(plan)
+        for r, path in enumerate(paths):
+            self._push(path.start_time, r, -1, path.start_time)
+
+    def _load(self, plan: DependencyPlan) -> int:
+        """Index ``plan``'s constraints; drop those whose waiter is past its wait point or
+        done (moot). Returns how many were dropped."""
+        n = len(self.paths)
+        wait_clock = _on_clock(self.paths, plan.waiter, plan.wait_s)  # (D,)
+        until_clock = _on_clock(self.paths, plan.waitee, plan.until_s)  # (D,)
+        clock, done = np.array(self.clock), np.array(self.done, dtype=bool)  # (R,) each
+        live = (wait_clock >= clock[plan.waiter]) & ~done[plan.waiter]  # (D,)
+        waitee = plan.waitee[live]  # (D',)
+        wait_clock, until_clock = wait_clock[live], until_clock[live]
+        self.satisfied = [False] * waitee.size
+        self.waiter = plan.waiter[live].tolist()
         # Per waiter, a heap of (wait clock, constraint); its limit is the least unsatisfied.
         self.blocking: list[list[tuple[float, int]]] = [[] for _ in range(n)]
-        for c, (w, clock) in enumerate(zip(plan.waiter.tolist(), wait_clock.tolist(), strict=True)):
-            self.blocking[w].append((clock, c))
+        for c, (w, wc) in enumerate(zip(self.waiter, wait_clock.tolist(), strict=True)):
+            self.blocking[w].append((wc, c))
         for heap in self.blocking:
             heapq.heapify(heap)
         # Per waitee, its release thresholds as progress-clock values, sorted.
-        order = np.lexsort((until_clock, plan.waitee))
+        order = np.lexsort((until_clock, waitee))
         self.release_order = order.tolist()
         self.release_clock = until_clock[order].tolist()
-        self.release_start = np.searchsorted(plan.waitee[order], np.arange(n + 1)).tolist()
+        self.release_start = np.searchsorted(waitee[order], np.arange(n + 1)).tolist()
         self.next_release = self.release_start[:-1]
-        self.events: list[tuple[float, int, int, int, float]] = []
-        self.seq = 0
+        return int(plan.size - waitee.size)
 
-    def run(self) -> Run:
-        for r, path in enumerate(self.paths):
-            self._push(path.start_time, r, -1, path.start_time)
+    @property
+    def finished(self) -> bool:
+        """Nothing more can happen: every robot is done or waits for ever (deadlock)."""
+        return not self.events
+
+    def advance(self, until: float) -> State:
+        """Run every event up to wall time ``until`` (included) and return the state then."""
+        while self.events and self.events[0][0] <= until:
+            self._pop()
+        self.now = until
+        return State(
+            until,
+            np.array([self._clock_at(r, until) for r in range(len(self.paths))]),
+            np.array(self.started, dtype=bool),
+            np.array(self.done, dtype=bool),
+            np.array(self.completion),
+        )
+
+    def replace_plan(self, plan: DependencyPlan) -> int:
+        """From the time of the last :meth:`advance` on, robots obey ``plan`` instead.
+
+        Constraints whose waiter is already past its wait point are moot and dropped;
+        those whose waitee has already reached its point are satisfied. Returns the
+        number of moot constraints.
+        """
+        present = [r for r in range(len(self.paths)) if self.started[r] and not self.done[r]]
+        for r in present:  # bring clocks up to now; pending events are rescheduled below
+            self._catch_up(r, self.now)
+        moot = self._load(plan)
+        for r in range(len(self.paths)):
+            if self.started[r]:
+                self._reach(r)
+        for r in present:
+            self._schedule(r)
+        return moot
+
+    def finish(self) -> Run:
+        """Run to the end and return what happened."""
         while self.events:
-            wall, _, r, version, clock = heapq.heappop(self.events)
-            if version == -1:
-                self._start(r)
-            elif version == self.version[r]:
-                self._arrive(r, wall, clock)
+            self._pop()
         return self._result()
+
+    def _pop(self) -> None:
+        wall, _, r, version, clock = heapq.heappop(self.events)
+        if version == -1:
+            self._start(r)
+        elif version == self.version[r]:
+            self._arrive(r, wall, clock)
 
     def _push(self, wall: float, r: int, version: int, clock: float) -> None:
         heapq.heappush(self.events, (wall, self.seq, r, version, clock))
@@ -120,7 +205,7 @@ class _Executor:
         heap = self.blocking[r]
         while heap and self.satisfied[heap[0][1]]:
             heapq.heappop(heap)
-        return heap[0][0] if heap else self.finish[r]
+        return heap[0][0] if heap else self.finish_clock[r]
 
     def _schedule(self, r: int) -> None:
         """Robot r moves from (wall, clock): push its next event, or stop it at its limit."""
@@ -128,12 +213,13 @@ class _Executor:
         if limit <= self.clock[r]:
             if self.moving[r]:
                 self.moving[r] = False
+                self.version[r] += 1  # a new plan may stop it before its pending event
                 self._record(r)
             return
         if not self.moving[r]:
             self.moving[r] = True
             self._record(r)
-        target = min(limit, self.finish[r])
+        target = min(limit, self.finish_clock[r])
         k = self.next_release[r]
         if k < self.release_start[r + 1]:
             target = min(target, self.release_clock[k])
@@ -152,7 +238,7 @@ class _Executor:
     def _arrive(self, r: int, wall: float, clock: float) -> None:
         """Robot r reached progress ``clock`` at ``wall``: release, finish or go on."""
         self.wall[r], self.clock[r] = wall, clock
-        if clock >= self.finish[r]:
+        if clock >= self.finish_clock[r]:
             self.done[r], self.moving[r] = True, False
             self.completion[r] = wall
             self._record(r)
@@ -160,8 +246,8 @@ class _Executor:
         if not self.done[r]:
             self._schedule(r)
 
-    def _release(self, r: int) -> None:
-        """Satisfy the constraints robot r has now reached and update their waiters."""
+    def _reach(self, r: int) -> set[int]:
+        """Satisfy the constraints robot r has now reached; return their waiters."""
         k, end = self.next_release[r], self.release_start[r + 1]
         waiters: set[int] = set()
         while k < end and (self.done[r] or self.release_clock[k] <= self.clock[r]):
@@ -170,17 +256,30 @@ class _Executor:
             waiters.add(self.waiter[c])
             k += 1
         self.next_release[r] = k
-        for w in sorted(waiters):
+        return waiters
+
+    def _release(self, r: int) -> None:
+        """Satisfy the constraints robot r has now reached and update their waiters."""
+        for w in sorted(self._reach(r)):
             self._wake(w, self.wall[r])
+
+    def _clock_at(self, r: int, wall: float) -> float:
+        """Robot r's progress clock at ``wall`` (never past its pending event: rounding of
+        advance/progress)."""
+        if not self.moving[r]:
+            return self.clock[r]
+        return min(self.clock[r] + self.rates[r].progress(self.wall[r], wall), self.target[r])
+
+    def _catch_up(self, r: int, wall: float) -> None:
+        """Bring robot r's clock up to ``wall``."""
+        self.clock[r] = self._clock_at(r, wall)
+        self.wall[r] = wall
 
     def _wake(self, w: int, wall: float) -> None:
         """Robot w's limit may have moved on at ``wall``: bring it up to date and reschedule."""
         if not self.started[w] or self.done[w]:
             return
-        if self.moving[w]:  # never past its pending event (rounding of advance/progress)
-            gained = self.clock[w] + self.rates[w].progress(self.wall[w], wall)
-            self.clock[w] = min(gained, self.target[w])
-        self.wall[w] = wall
+        self._catch_up(w, wall)
         self._schedule(w)
 
     def _record(self, r: int) -> None:
@@ -244,4 +343,4 @@ def execute(
     paths: Sequence[RobotPath], plan: DependencyPlan, rates: Sequence[Rate] | None = None
 ) -> Run:
     """Run ``plan`` on ``paths`` (optionally disturbed by one :class:`Rate` per robot)."""
-    return _Executor(paths, plan, rates or [Rate()] * len(paths)).run()
+    return Execution(paths, plan, rates).finish()

@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from service.geometry.paths import RobotPath
 from service.motion.trajectories import trajectories
 from service.simulation.disturbances import Rate
-from service.simulation.executor import DependencyPlan, Run, execute
+from service.simulation.executor import DependencyPlan, Execution, Run, execute
 from tests.motion.worlds import paths_of, request, robot
 from tests.simulation.reference_executor import step_execute
 
@@ -260,3 +260,87 @@ def test_executor_agrees_with_a_time_stepped_reference(
         else:
             assert run.completion[r] == pytest.approx(ref.completion[r], abs=4 * hops * STEP_DT)
     _assert_never_faster(paths, run)
+
+
+# ---- pausing and continuing under another plan ----------------------------------------
+
+
+def test_state_at_a_pause_reads_where_each_robot_stands() -> None:
+    """At t=4: a (1 m/s) at 4 m, b (2 m/s) waiting at 4 m since t=2, c not started (t=5)."""
+    paths = _paths(
+        robot("a", LANE[0]), robot("b", LANE[1], speed=2.0), robot("c", LANE[2], start_time=5.0)
+    )
+    execution = Execution(paths, _plan((1, 4.0, 0, 6.0)))
+    state = execution.advance(4.0)
+    assert state.time == 4.0
+    np.testing.assert_allclose(state.clock, [4.0, 2.0, 5.0])  # b's clock: 4 m at 2 m/s
+    np.testing.assert_allclose(state.arcs(paths), [4.0, 4.0, 0.0])
+    assert state.started.tolist() == [True, True, False] and not state.done.any()
+    state = execution.advance(10.0)  # b left at t=6 and arrived at t=9; c started at t=5
+    assert state.done.tolist() == [True, True, False] and state.started.all()
+    np.testing.assert_allclose(state.completion[:2], [10.0, 9.0])
+    assert state.clock[2] == 10.0
+
+
+@settings(max_examples=15, deadline=None, derandomize=True)
+@given(case=plans_st(), pauses=st.lists(st.floats(0.0, 30.0), max_size=4))
+def test_pausing_and_continuing_with_the_same_plan_changes_nothing(
+    case: tuple[list[RobotPath], DependencyPlan, list[Rate]], pauses: list[float]
+) -> None:
+    paths, plan, rates = case
+    whole = execute(paths, plan, rates)
+    execution = Execution(paths, plan, rates)
+    for t in sorted(pauses):
+        execution.advance(t)
+        execution.replace_plan(plan)
+    paused = execution.finish()
+    assert paused.deadlocked == whole.deadlocked
+    np.testing.assert_allclose(paused.completion, whole.completion, atol=1e-9)
+    for r, path in enumerate(paths):  # the same motion: arc length at the same times
+        probe = np.linspace(path.start_time, np.nanmax(whole.completion, initial=0.0) + 1, 50)
+        np.testing.assert_allclose(
+            np.interp(probe, paused.wall[r], paused.arcs(paths)[r]),
+            np.interp(probe, whole.wall[r], whole.arcs(paths)[r]),
+            atol=1e-9,
+        )
+    _assert_never_faster(paths, paused)
+
+
+@pytest.mark.parametrize(
+    ("pause", "track"),
+    [
+        # at t=1 b is at 2 m: it drives on to the new wait point, 6 m, and waits there
+        (1.0, [(0.0, 0.0), (3.0, 6.0), (8.0, 6.0), (10.0, 10.0)]),
+        # at t=3 b is exactly at 6 m: that wait point is not passed, so not moot
+        (3.0, [(0.0, 0.0), (3.0, 6.0), (8.0, 6.0), (10.0, 10.0)]),
+    ],
+)
+def test_a_new_plan_stops_a_moving_robot_at_its_new_wait_point(
+    pause: float, track: list[tuple[float, float]]
+) -> None:
+    """b (2 m/s) drives freely; at ``pause`` a new plan says: wait at 6 until a reached 8."""
+    paths = _paths(robot("a", LANE[0]), robot("b", LANE[1], speed=2.0))
+    execution = Execution(paths, DependencyPlan.empty())
+    execution.advance(pause)
+    assert execution.replace_plan(_plan((1, 6.0, 0, 8.0))) == 0
+    assert _track(paths, execution.finish(), 1) == track
+
+
+def test_a_new_plan_releases_a_waiting_robot_and_drops_passed_wait_points() -> None:
+    """b waits at 4 for a at 6; at t=3 the new plan drops that wait and adds two: one at
+    2 (b is past it: moot) and one at 9 that a has not reached."""
+    paths = _paths(robot("a", LANE[0]), robot("b", LANE[1], speed=2.0))
+    execution = Execution(paths, _plan((1, 4.0, 0, 6.0)))
+    execution.advance(3.0)
+    assert execution.replace_plan(_plan((1, 2.0, 0, 9.0), (1, 9.0, 0, 5.0))) == 1
+    run = execution.finish()
+    # From t=3 b drives on (4 -> 9 m by t=5.5), a has reached 5 m at t=5: no wait at 9.
+    assert _track(paths, run, 1) == [(0.0, 0.0), (2.0, 4.0), (3.0, 4.0), (6.0, 10.0)]
+
+
+def test_a_waitee_that_already_passed_satisfies_the_new_plan_at_once() -> None:
+    paths = _paths(robot("a", LANE[0]), robot("b", LANE[1], speed=2.0))
+    execution = Execution(paths, _plan((1, 4.0, 0, 9.0)))
+    execution.advance(7.0)  # b waits at 4 since t=2, a at 7 m
+    execution.replace_plan(_plan((1, 4.0, 0, 6.0)))  # a is past 6: b goes at t=7
+    assert _track(paths, execution.finish(), 1)[-2:] == [(7.0, 4.0), (10.0, 10.0)]
