@@ -6,15 +6,44 @@ by a dependency, it stands still and the clock stops. A disturbance changes the
 rate over a stretch of wall time: 0 for a stop, ``factor`` < 1 for a slow-down.
 A late start is a stop from the planned start time. Rates never exceed 1, so a
 disturbed robot is never faster than planned.
+
+**Profiles** (:data:`PROFILES`) draw seeded disturbances for benchmarks. Each robot
+is hit by each kind of disturbance independently with probability ``share``,
+once; the duration is exponential with mean ``mean_s``; a stop or slow-down
+begins at a wall time uniform over the robot's window (its start to its
+undisturbed completion), a late start at its start time; a slow-down's factor is
+uniform over ``factor``:
+
+=========  ==================  ==================  =================================
+profile    late start          stop                slow-down
+=========  ==================  ==================  =================================
+light      10 %, mean 5 s      10 %, mean 5 s      10 %, mean 10 s, factor 0.5-0.9
+heavy      30 %, mean 20 s     30 %, mean 20 s     30 %, mean 30 s, factor 0.2-0.6
+=========  ==================  ==================  =================================
+
+:func:`played_by_clock` is what a robot does that plays back a timed trajectory
+by its clock when disturbed: it falls behind and never catches up.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["Disturbance", "Rate"]
+from service.simulation.clearance import Trajectory
+
+__all__ = [
+    "PROFILES",
+    "Disturbance",
+    "Hazard",
+    "Profile",
+    "Rate",
+    "Window",
+    "played_by_clock",
+    "rates_of",
+]
 
 
 @dataclass(frozen=True)
@@ -91,3 +120,86 @@ class Rate:
     def breakpoints(self, t0: float, t1: float) -> np.ndarray:
         """Wall times strictly inside (t0, t1) where the rate changes."""
         return self.edges[(self.edges > t0) & (self.edges < t1)]
+
+
+def rates_of(ids: Sequence[str], disturbances: Sequence[Disturbance]) -> list[Rate]:
+    """One progress rate per robot of ``ids`` (in that order) from ``disturbances``."""
+    pieces: dict[str, list[tuple[float, float, float]]] = {rid: [] for rid in ids}
+    for d in disturbances:
+        pieces[d.robot].append((d.start, d.duration, d.factor))
+    return [Rate.of(pieces[rid]) for rid in ids]
+
+
+def played_by_clock(traj: Trajectory, rate: Rate) -> Trajectory:
+    """``traj`` played back by a clock that runs at ``rate`` (a robot that follows its
+    timed trajectory and is stopped or slowed: it falls behind and never catches up).
+
+    At wall time t the robot is where ``traj`` is at its own time
+    ``t0 + rate.progress(t0, t)``, t0 its first time; waits in ``traj`` are played
+    back too. Shapes: K waypoints -> K + (rate changes during the playback).
+    """
+    t0 = float(traj.t[0])
+    walls = np.array([rate.advance(t0, float(t) - t0) for t in traj.t])  # (K,)
+    edges = rate.breakpoints(t0, float(walls[-1]))  # (E,) rate changes during the playback
+    own = t0 + np.array([rate.progress(t0, float(b)) for b in edges])  # (E,) traj time then
+    xy = np.column_stack([np.interp(own, traj.t, traj.xy[:, k]) for k in (0, 1)])  # (E, 2)
+    wall = np.concatenate([walls, edges])
+    order = np.argsort(wall, kind="stable")
+    return Trajectory(wall[order], np.concatenate([traj.xy, xy])[order], traj.radius)
+
+
+Window = tuple[str, float, float]  # robot id, wall times from which and until which it is hit
+
+
+@dataclass(frozen=True)
+class Hazard:
+    """One kind of disturbance of a profile: each robot is hit with probability ``share``
+    (independently, once), for an exponential duration of mean ``mean_s`` seconds, at a
+    rate factor uniform over ``factor`` (0 is a stop)."""
+
+    share: float
+    mean_s: float
+    factor: tuple[float, float] = (0.0, 0.0)
+
+    def draw(
+        self, rng: np.random.Generator, ids: Sequence[str], start: np.ndarray
+    ) -> list[Disturbance]:
+        """Disturbances of the robots hit, beginning at ``start`` (R,) wall times."""
+        n = len(ids)
+        hit = rng.random(n) < self.share  # (R,) every draw is made, hit or not: the stream
+        duration = rng.exponential(self.mean_s, n)  # of one kind never depends on the others
+        factor = rng.uniform(*self.factor, n)
+        return [
+            Disturbance(ids[r], float(start[r]), float(duration[r]), float(factor[r]))
+            for r in np.flatnonzero(hit).tolist()
+        ]
+
+
+@dataclass(frozen=True)
+class Profile:
+    """Late starts, stops and slow-downs, each a :class:`Hazard` (table in the module doc)."""
+
+    late_start: Hazard
+    stop: Hazard
+    slow_down: Hazard
+
+    def draw(self, windows: Sequence[Window], seed: int) -> list[Disturbance]:
+        """Seeded disturbances of the robots of ``windows``: late starts at each window's
+        start, stops and slow-downs beginning uniformly inside it."""
+        rng = np.random.default_rng(seed)
+        ids = [w[0] for w in windows]
+        begin = np.array([w[1] for w in windows], dtype=float)  # (R,)
+        end = np.maximum(np.array([w[2] for w in windows], dtype=float), begin)  # (R,)
+        out = self.late_start.draw(rng, ids, begin)
+        out += self.stop.draw(rng, ids, rng.uniform(begin, end))
+        out += self.slow_down.draw(rng, ids, rng.uniform(begin, end))
+        return out
+
+
+# Benchmark profiles (issue 12): "light" is a few seconds for about one robot in ten per
+# kind (a person crossing, a slow turn), "heavy" tens of seconds for a third (a blocked
+# aisle, a manual intervention). Chosen for the benchmark, not measured on a fleet.
+PROFILES = {
+    "light": Profile(Hazard(0.1, 5.0), Hazard(0.1, 5.0), Hazard(0.1, 10.0, (0.5, 0.9))),
+    "heavy": Profile(Hazard(0.3, 20.0), Hazard(0.3, 20.0), Hazard(0.3, 30.0, (0.2, 0.6))),
+}
