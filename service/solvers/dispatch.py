@@ -20,6 +20,7 @@ import numpy as np
 from service.core.assignment import Assignments
 from service.core.check import CheckResult, check
 from service.core.cliques import Cliques
+from service.core.dependency_plan import dependency_plan
 from service.core.problem import ErrorItem, Problem, ProblemError, problem_from_request
 from service.core.progress import previous_from_wire, progress_from_wire, residual_problem
 from service.core.schemas import (
@@ -66,6 +67,11 @@ FALLBACKS: dict[str, tuple[str, ...]] = {
 }
 LAST_RESORT = "fcfs"
 
+# The solver stops this early for the answer's check, evaluation and rendering: measured
+# 50 ms at 250 robots and 22,000 conflicts with the dependency plan (2.3 us per conflict).
+RENDER_S_PER_ITEM = 3e-6
+RENDER_S_MIN = 0.002
+
 
 class InvalidAnswerError(RuntimeError):
     """Even the fallback produced an assignment the checker rejects (a bug, never expected)."""
@@ -82,12 +88,23 @@ class DispatchPolicy:
     models: Mapping[str, StoredModel] = field(default_factory=dict)  # loaded GNN-VAEs by objective
 
 
-def choose_solver(request: ScheduleRequest, n_conflicts: int, policy: DispatchPolicy) -> str:
-    """The solver that answers: the requested one, or by size for ``auto``."""
+def choose_solver(
+    request: ScheduleRequest, n_conflicts: int, policy: DispatchPolicy, warm: bool = False
+) -> str:
+    """The solver that answers: the requested one, or by size for ``auto``.
+
+    A large re-schedule with a warm start (``warm``: the previous answer, valid) goes to
+    tabu search from it: re-schedules come often with short budgets, and the learned
+    model's first samples alone took 1.5-2.4 s at 250 robots and 22,000 conflicts
+    (docs/benchmarks.md, Disturbances), where tabu from the previous answer improves
+    it within 100 ms.
+    """
     name = request.options.solver
     if name != "auto":
         return name
-    return "exact" if n_conflicts <= policy.exact_max_conflicts else policy.large_solver
+    if n_conflicts <= policy.exact_max_conflicts:
+        return "exact"
+    return "tabu" if warm else policy.large_solver
 
 
 def dispatch(
@@ -134,7 +151,11 @@ def solve_problem(
     ctx = SolveContext(
         problem=problem,
         objective=request.objective,
-        time_limit_s=_time_left(opts.time_limit_s or policy.default_time_limit_s, deadline),
+        time_limit_s=max(
+            0.0,
+            _time_left(opts.time_limit_s or policy.default_time_limit_s, deadline)
+            - _render_reserve(problem),
+        ),
         seed=opts.seed,
         samples=opts.samples,
         workers=policy.exact_workers,
@@ -142,7 +163,6 @@ def solve_problem(
     )
     if cliques is not None:
         ctx.__dict__["cliques"] = cliques  # the cached property, filled in advance
-    name = choose_solver(request, problem.n_conflicts, policy)
     start = time.perf_counter()
     # The cliques first: every solver and the checker need them, and a problem whose
     # cliques exceed the work budget (TooManyCliques) is refused before any solver
@@ -150,6 +170,7 @@ def solve_problem(
     _check_realized_density(problem, ctx.cliques)
     if warm is not None and check(problem, ctx.cliques, warm).ok[0]:
         ctx.warm = warm
+    name = choose_solver(request, problem.n_conflicts, policy, warm=ctx.warm is not None)
     used, output, checks = _first_valid_answer(ctx, name)
     runtime = time.perf_counter() - start
     info = SolverInfoOut(
@@ -193,6 +214,11 @@ def _check_realized_density(problem: Problem, cliques: Cliques) -> None:
                 for q in over[:50].tolist()
             ]
         )
+
+
+def _render_reserve(problem: Problem) -> float:
+    """Seconds kept after the solve for checking, evaluating and rendering its answer."""
+    return RENDER_S_PER_ITEM * (problem.n_conflicts + problem.n_nodes) + RENDER_S_MIN
 
 
 def _time_left(time_limit_s: float, deadline: float | None) -> float:
@@ -267,6 +293,7 @@ def _render(
     ]
     costs = {k: float(v[0]) for k, v in result.costs.items()}
     return ScheduleResponse(
+        dependencies=dependency_plan(problem, output.assignment),
         objective=request.objective,
         cost=costs[request.objective],
         costs=CostsOut(**costs),

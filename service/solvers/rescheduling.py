@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import time
 
+from service.core.assignment import Assignments
 from service.core.cliques import Cliques, find_cliques
 from service.core.problem import Problem, problem_from_request
 from service.core.progress import previous_from_wire, progress_from_wire, residual_problem
@@ -43,13 +44,14 @@ class Rescheduler:
 
     def solve(
         self,
-        previous: list[PreviousConflictIn] | None,
+        previous: list[PreviousConflictIn] | Assignments | None,
         progress: ProgressIn,
         *,
         time_limit_s: float,
         solver: SolverName = "auto",
     ) -> ScheduleResponse:
-        """The checked answer from ``progress.time`` on, warm-started from ``previous``.
+        """The checked answer from ``progress.time`` on, warm-started from ``previous``
+        (the wire list, or the assignment itself: in-process callers skip the mapping).
 
         The time limit counts from the call (the residual problem's construction
         included), like a request's from its arrival.
@@ -58,7 +60,9 @@ class Rescheduler:
             ProblemError: the progress or previous assignment is invalid for this graph.
         """
         deadline = time.monotonic() + time_limit_s
-        warm = None if previous is None else previous_from_wire(self.problem, previous)
+        warm = previous
+        if isinstance(previous, list):
+            warm = previous_from_wire(self.problem, previous)
         residual = residual_problem(
             self.problem, progress_from_wire(self.problem, progress), warm
         )

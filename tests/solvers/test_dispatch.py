@@ -89,6 +89,8 @@ def test_auto_routes_by_size() -> None:
     small = _request(small_problem(0), solver="auto")
     assert choose_solver(small, 2, POLICY) == "exact"
     assert choose_solver(small, 61, POLICY) == POLICY.large_solver
+    assert choose_solver(small, 61, POLICY, warm=True) == "tabu"
+    assert choose_solver(small, 2, POLICY, warm=True) == "exact"
     assert choose_solver(_request(small_problem(0), solver="fcfs"), 2, POLICY) == "fcfs"
 
 
