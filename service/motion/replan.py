@@ -1,0 +1,153 @@
+"""Re-scheduling paths-form plans while robots run: from executed state to a new plan.
+
+A fleet executes the dependency plan of an answer; robots run late. Every so
+often (or on events) the fleet's state goes back to the scheduler as graph-form
+progress, the scheduler answers a new assignment from that moment on (realized
+decisions keep their direction, docs/contract.md), and the robots continue under
+the dependency plan of that assignment:
+
+* :func:`progress_at`: an executor :class:`State` at wall time t as the graph
+  form's ``progress``: a present robot at progress clock c (the planned time of
+  where it stands) has passed every time point planned before c (not at c: a robot
+  standing exactly at a wait point has not passed it) and runs ``t - c`` late;
+* :func:`previous_of`: the assignment being executed, as the request's ``previous``;
+* :func:`plan_of`: an answer's assignment as the executor's dependency plan (the
+  same decision and staircases as :func:`service.motion.plan.plan_paths` builds);
+* :func:`execute_rescheduled`: the loop, executing a plan and swapping in each
+  new answer's plan at the re-scheduling times (instantly: the simulated clock does
+  not run while the scheduler thinks).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+
+import numpy as np
+
+from service.core.problem import ProblemError
+from service.core.schemas import (
+    PreviousConflictIn,
+    ProgressIn,
+    RobotProgressIn,
+    ScheduleResponse,
+)
+from service.geometry.graph import CoordinationGraph
+from service.motion.dependencies import dependency_plan
+from service.motion.plan import decision
+from service.simulation.disturbances import Rate
+from service.simulation.executor import DependencyPlan, Execution, Run, State
+
+__all__ = [
+    "Replan",
+    "Rescheduled",
+    "Solve",
+    "execute_rescheduled",
+    "plan_of",
+    "previous_of",
+    "progress_at",
+]
+
+log = logging.getLogger(__name__)
+
+# What the loop calls to re-schedule: (previous assignment, progress) -> checked answer.
+Solve = Callable[[list[PreviousConflictIn], ProgressIn], ScheduleResponse]
+
+
+def progress_at(graph: CoordinationGraph, state: State) -> ProgressIn:
+    """The graph-form progress of the graph's robots in ``state``.
+
+    Robots whose start time has not come are left out (not started). A robot that
+    is done has passed everything and ran ``completion - finish`` late. A robot
+    standing at progress clock 0 has passed nothing and cannot say so (times are
+    >= 0): it is left out too, which the scheduler reads as "cannot reach any point
+    before ``state.time``".
+    """
+    robots = {}
+    for r in graph.robots_in_graph().tolist():
+        path, clock = graph.paths[r], float(state.clock[r])
+        if not state.started[r] or (clock <= 0.0 and not state.done[r]):
+            continue
+        if state.done[r]:
+            passed, delay = path.finish_time, float(state.completion[r]) - path.finish_time
+        else:
+            passed, delay = float(np.nextafter(clock, -np.inf)), state.time - clock
+        robots[path.id] = RobotProgressIn(passed_until=passed, delay=max(delay, 0.0))
+    return ProgressIn(time=state.time, robots=robots)
+
+
+def previous_of(answer: ScheduleResponse) -> list[PreviousConflictIn]:
+    """``answer``'s assignment as the ``previous`` of the next re-schedule."""
+    return [PreviousConflictIn.model_validate(a) for a in answer.assignment]
+
+
+def plan_of(graph: CoordinationGraph, answer: ScheduleResponse) -> DependencyPlan:
+    """The executor's dependency plan of ``answer``'s assignment on ``graph``."""
+    return dependency_plan(graph, decision(graph, answer))
+
+
+@dataclass(frozen=True)
+class Replan:
+    """One re-schedule of a run: when, how long it took, what it changed.
+
+    ``solve_s`` is the scheduler's call alone; ``total_s`` adds reading the state,
+    building the progress and the new dependency plan, and swapping it in.
+    ``error`` is the scheduler's refusal (the run then kept its plan).
+    """
+
+    time: float
+    solve_s: float
+    total_s: float
+    constraints: int  # of the new plan
+    moot: int  # constraints of the new plan whose waiter had already passed its point
+    error: str | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class Rescheduled:
+    """An executed run with re-scheduling, and every re-schedule it made."""
+
+    run: Run
+    replans: list[Replan]
+
+
+def execute_rescheduled(
+    graph: CoordinationGraph,
+    plan: DependencyPlan,
+    previous: list[PreviousConflictIn],
+    rates: list[Rate],
+    solve: Solve,
+    times: Iterable[float],
+) -> Rescheduled:
+    """Execute ``plan`` (whose assignment is ``previous``) and re-schedule at ``times``.
+
+    ``times`` are increasing wall times (an endless one is fine: the loop stops once
+    every robot is done or none can move). A refused re-schedule (ProblemError) is
+    recorded and the run keeps its plan.
+    """
+    execution = Execution(graph.paths, plan, rates)
+    replans: list[Replan] = []
+    for t in times:
+        if execution.finished:
+            break
+        state = execution.advance(t)
+        if state.done.all():
+            break
+        start = time.perf_counter()
+        progress = progress_at(graph, state)
+        solve_start = time.perf_counter()
+        try:
+            answer = solve(previous, progress)
+        except ProblemError as exc:
+            log.error("re-schedule at t=%.3f refused: %s", t, exc)
+            elapsed = time.perf_counter() - solve_start
+            replans.append(Replan(t, elapsed, time.perf_counter() - start, 0, 0, str(exc)))
+            continue
+        solve_s = time.perf_counter() - solve_start
+        new_plan = plan_of(graph, answer)
+        moot = execution.replace_plan(new_plan)
+        previous = previous_of(answer)
+        replans.append(Replan(t, solve_s, time.perf_counter() - start, new_plan.size, moot))
+    return Rescheduled(execution.finish(), replans)
