@@ -37,6 +37,7 @@ from service.solvers import (  # noqa: F401  (registers the solvers)
     fcfs,
     gnn_vae,
     hybrid,
+    portfolio,
     random_search,
     refine,
     tabu,
@@ -86,25 +87,6 @@ class DispatchPolicy:
     large_solver: str = "gnn_vae_refined"
     exact_workers: int = 1
     models: Mapping[str, StoredModel] = field(default_factory=dict)  # loaded GNN-VAEs by objective
-
-
-def choose_solver(
-    request: ScheduleRequest, n_conflicts: int, policy: DispatchPolicy, warm: bool = False
-) -> str:
-    """The solver that answers: the requested one, or by size for ``auto``.
-
-    A large re-schedule with a warm start (``warm``: the previous answer, valid) goes to
-    tabu search from it: re-schedules come often with short budgets, and the learned
-    model's first samples alone took 1.5-2.4 s at 250 robots and 22,000 conflicts
-    (docs/benchmarks.md, Disturbances), where tabu from the previous answer improves
-    it within 100 ms.
-    """
-    name = request.options.solver
-    if name != "auto":
-        return name
-    if n_conflicts <= policy.exact_max_conflicts:
-        return "exact"
-    return "tabu" if warm else policy.large_solver
 
 
 def dispatch(
@@ -160,6 +142,8 @@ def solve_problem(
         samples=opts.samples,
         workers=policy.exact_workers,
         models=policy.models,
+        exact_max_conflicts=policy.exact_max_conflicts,
+        first_stage=policy.large_solver,
     )
     if cliques is not None:
         ctx.__dict__["cliques"] = cliques  # the cached property, filled in advance
@@ -170,7 +154,7 @@ def solve_problem(
     _check_realized_density(problem, ctx.cliques)
     if warm is not None and check(problem, ctx.cliques, warm).ok[0]:
         ctx.warm = warm
-    name = choose_solver(request, problem.n_conflicts, policy, warm=ctx.warm is not None)
+    name = request.options.solver  # "auto" is the anytime portfolio (solvers/portfolio.py)
     used, output, checks = _first_valid_answer(ctx, name)
     runtime = time.perf_counter() - start
     info = SolverInfoOut(

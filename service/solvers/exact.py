@@ -29,6 +29,7 @@ but which of several optimal assignments is returned may vary.
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -80,6 +81,12 @@ class ExactModel:
             for lit, val in zip(lits, vals.tolist(), strict=True)
         ]
         self.model.add_bool_or(clause)
+
+
+# The least search time CP-SAT gets when building its model used up the time limit.
+MIN_SEARCH_S = 0.001
+# Building the model, measured: 36 ms at 262 conflicts, 2.5 s at 21,835 (~120 us each).
+BUILD_S_PER_CONFLICT = 1.2e-4
 
 
 @dataclass(frozen=True)
@@ -308,13 +315,16 @@ def solve(
 ) -> ExactResult | None:
     """Best assignment CP-SAT finds within the time limit (None if it found none).
 
+    The time limit counts from the call: building the model (~120 us per conflict)
+    is part of it, and CP-SAT searches for what is left (at least MIN_SEARCH_S).
     ``on_solution`` (optional) sees every improving solution with its wall time,
     e.g. for measuring how fast CP-SAT reaches a given cost.
     """
+    deadline = time.monotonic() + time_limit_s
     em = build_model(problem, cliques, objective)
     if hint is not None:
         em.add_hint(hint)
-    solver = _params(time_limit_s, seed, workers)
+    solver = _params(max(MIN_SEARCH_S, deadline - time.monotonic()), seed, workers)
     callback = None if on_solution is None else _Incumbents(em, on_solution)
     status = solver.solve(em.model, callback)
     if status not in (cp_model.OPTIMAL, cp_model.FEASIBLE):

@@ -44,6 +44,10 @@ class SolveContext:
     on_solution: Callable[[float, Assignments], None] | None = None
     # A valid assignment to start local search from: the previous answer of a re-schedule.
     warm: Assignments | None = None
+    # The portfolio (``auto``): CP-SAT alone up to this many conflicts; above, this solver
+    # first (the policy's large solver), then CP-SAT hinted with its answer.
+    exact_max_conflicts: int = 60
+    first_stage: str = "gnn_vae_refined"
 
     @cached_property
     def cliques(self) -> Cliques:

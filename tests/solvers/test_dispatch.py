@@ -12,7 +12,7 @@ from service.core.problem import ProblemError
 from service.core.schemas import ScheduleRequest
 from service.learning.generate import small_problem
 from service.solvers import registry
-from service.solvers.dispatch import DispatchPolicy, choose_solver, dispatch
+from service.solvers.dispatch import DispatchPolicy, dispatch
 from service.solvers.registry import SolveContext, SolverOutput
 from tests.reference import costs, least_times, reference_problem, trap_request
 
@@ -83,15 +83,6 @@ def test_invalid_answer_is_never_returned(monkeypatch: pytest.MonkeyPatch) -> No
     assert response.solver.name == "fcfs" and response.solver.fallback_from == "exact"
     assert response.checks.acyclic
     assert response.cost > 10.0
-
-
-def test_auto_routes_by_size() -> None:
-    small = _request(small_problem(0), solver="auto")
-    assert choose_solver(small, 2, POLICY) == "exact"
-    assert choose_solver(small, 61, POLICY) == POLICY.large_solver
-    assert choose_solver(small, 61, POLICY, warm=True) == "tabu"
-    assert choose_solver(small, 2, POLICY, warm=True) == "exact"
-    assert choose_solver(_request(small_problem(0), solver="fcfs"), 2, POLICY) == "fcfs"
 
 
 def test_invalid_problem_raises() -> None:

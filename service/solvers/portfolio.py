@@ -1,0 +1,140 @@
+"""``auto``: an anytime portfolio that uses the request's whole budget and proves what it can.
+
+It returns when optimality is proven or when the budget is spent, whichever
+comes first, improving in stages:
+
+1. **instant**: FCFS, or the previous answer of a re-schedule when cheaper
+   (valid by construction, microseconds to milliseconds);
+2. **first stage** (problems above ``exact_max_conflicts``): the policy's large
+   solver (default ``gnn_vae_refined``: the learned model's best sample refined
+   by tabu search), or tabu search from the previous answer in a re-schedule,
+   with FIRST_STAGE_SHARE of the budget;
+3. **exact**: CP-SAT hinted with the best answer so far, for the rest of the
+   budget; it proves optimality where it can (``solver.optimal`` is true only
+   then) and never returns worse than its hint (the cheaper is kept, by the one
+   evaluator). It is skipped when building its model alone would not fit in
+   what is left (~120 us per conflict).
+
+Small problems go straight to stage 3 (CP-SAT proves them in milliseconds).
+Robots that share no conflict, directly or through others, form independent
+components (:mod:`service.core.decompose`); for the objectives that decompose,
+each is solved on its own, smallest first, with the time left shared by
+conflict count (small components usually finish early and leave their time to
+the large ones); the answer is optimal when every component's is.
+sync_completion is solved whole.
+
+Trade-off of the budget (the default is ``SCHEDULER_DEFAULT_TIME_LIMIT_S``):
+latency is the budget unless optimality is proven sooner; quality grows with
+it (docs/benchmarks.md, "Anytime auto").
+"""
+
+from __future__ import annotations
+
+import copy
+import time
+from dataclasses import replace
+
+from service.core.assignment import Assignments
+from service.core.decompose import DECOMPOSABLE, Part, join, parts
+from service.solvers.exact import BUILD_S_PER_CONFLICT, solve
+from service.solvers.registry import SolveContext, SolverOutput, get_solver, register
+from service.solvers.tabu import plain_start
+
+__all__ = ["FIRST_STAGE_SHARE", "auto"]
+
+# Share of the budget the first stage (learned model + tabu, or tabu from the previous
+# answer) gets before CP-SAT takes the rest.
+FIRST_STAGE_SHARE = 0.3
+
+
+@register("auto")
+def auto(ctx: SolveContext) -> SolverOutput:
+    """The best answer the staged portfolio reaches by the deadline (see the module)."""
+    deadline = time.monotonic() + ctx.time_limit_s
+    pieces = parts(ctx.problem) if ctx.objective in DECOMPOSABLE else []
+    if len(pieces) <= 1:
+        return _staged(ctx, deadline)
+    pieces.sort(key=lambda part: part.problem.n_conflicts)
+    outputs: list[tuple[Part, SolverOutput]] = []
+    left_conflicts = sum(part.problem.n_conflicts for part in pieces)
+    for part in pieces:
+        share = (deadline - time.monotonic()) * part.problem.n_conflicts / left_conflicts
+        left_conflicts -= part.problem.n_conflicts
+        sub = _part_context(ctx, part, max(share, 0.0))
+        outputs.append((part, _staged(sub, time.monotonic() + sub.time_limit_s)))
+    optimal = all(out.optimal for _, out in outputs)
+    proven = sum(out.optimal for _, out in outputs)
+    return SolverOutput(
+        join(ctx.problem, [(part, out.assignment) for part, out in outputs]),
+        optimal=optimal,
+        detail=f"{len(pieces)} independent components, {proven} proven optimal",
+    )
+
+
+def _part_context(ctx: SolveContext, part: Part, time_limit_s: float) -> SolveContext:
+    """A context for one component, with the warm start cut to its conflicts."""
+    warm = ctx.warm
+    if warm is not None:
+        warm = Assignments(warm.a_first[:, part.conflicts], warm.following[:, part.conflicts])
+    return replace(
+        ctx, problem=part.problem, time_limit_s=time_limit_s, warm=warm, on_solution=None
+    )
+
+
+def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
+    """Instant answer, first stage, then hinted CP-SAT, within ``deadline`` (monotonic)."""
+    problem = ctx.problem
+    best, stages = SolverOutput(plain_start(ctx)), ["start"]
+    if problem.n_conflicts == 0:
+        return replace(best, optimal=True, detail="no conflict")
+    cost = _cost(ctx, best.assignment)
+    if problem.n_conflicts > ctx.exact_max_conflicts:
+        first = "tabu" if ctx.warm is not None else ctx.first_stage
+        budget = FIRST_STAGE_SHARE * (deadline - time.monotonic())
+        found = get_solver(first)(_with_time(ctx, budget))
+        if found is not None and _cost(ctx, found.assignment) <= cost:
+            best, cost = found, _cost(ctx, found.assignment)
+            stages.append(first)
+    left = deadline - time.monotonic()
+    if left <= 2 * BUILD_S_PER_CONFLICT * problem.n_conflicts:
+        return replace(best, optimal=False, detail=_detail(stages, "no time for CP-SAT"))
+    result = solve(
+        problem,
+        ctx.cliques,
+        ctx.objective,
+        left,
+        seed=ctx.seed,
+        workers=ctx.workers,
+        hint=best.assignment,
+        on_solution=ctx.on_solution,
+    )
+    if result is None:
+        return replace(best, optimal=False, detail=_detail(stages, "CP-SAT found nothing"))
+    exact_cost = _cost(ctx, result.assignment)
+    if exact_cost > cost:  # the hint may be lost to CP-SAT's integer time scaling
+        return replace(best, optimal=False, detail=_detail(stages, "CP-SAT did not improve"))
+    verdict = "proven optimal by CP-SAT" if result.optimal else "improved by CP-SAT"
+    if exact_cost == cost and not result.optimal:
+        verdict = "CP-SAT kept it, unproven"
+    return SolverOutput(
+        result.assignment,
+        optimal=result.optimal,
+        model=best.model,
+        samples=best.samples,
+        detail=_detail(stages, verdict),
+    )
+
+
+def _with_time(ctx: SolveContext, time_limit_s: float) -> SolveContext:
+    """``ctx`` with another time limit, sharing its cliques, evaluator and decoder."""
+    out = copy.copy(ctx)  # the cached properties live in __dict__ and are shared
+    out.time_limit_s = max(time_limit_s, 0.0)
+    return out
+
+
+def _cost(ctx: SolveContext, assignment: Assignments) -> float:
+    return float(ctx.evaluator.evaluate(assignment).costs[ctx.objective][0])
+
+
+def _detail(stages: list[str], verdict: str) -> str:
+    return f"{' -> '.join(stages)}; {verdict}"
