@@ -13,7 +13,8 @@ comes first, improving in stages:
    budget; it proves optimality where it can (``solver.optimal`` is true only
    then) and never returns worse than its hint (the cheaper is kept, by the one
    evaluator). It is skipped when building its model alone would not fit in
-   what is left (~120 us per conflict).
+   what is left (~120 us per conflict); the first stage then gets the whole budget,
+   and tabu search polishes its answer with whatever the first stage leaves.
 
 Small problems go straight to stage 3 (CP-SAT proves them in milliseconds).
 Robots that share no conflict, directly or through others, form independent
@@ -38,7 +39,7 @@ from service.core.assignment import Assignments
 from service.core.decompose import DECOMPOSABLE, Part, join, parts
 from service.solvers.exact import BUILD_S_PER_CONFLICT, solve
 from service.solvers.registry import SolveContext, SolverOutput, get_solver, register
-from service.solvers.tabu import plain_start
+from service.solvers.tabu import plain_start, tabu_search
 
 __all__ = ["FIRST_STAGE_SHARE", "auto"]
 
@@ -88,15 +89,21 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
     if problem.n_conflicts == 0:
         return replace(best, optimal=True, detail="no conflict")
     cost = _cost(ctx, best.assignment)
+    build_s = 2 * BUILD_S_PER_CONFLICT * problem.n_conflicts  # CP-SAT: build, search as long
     if problem.n_conflicts > ctx.exact_max_conflicts:
         first = "tabu" if ctx.warm is not None else ctx.first_stage
-        budget = FIRST_STAGE_SHARE * (deadline - time.monotonic())
-        found = get_solver(first)(_with_time(ctx, budget))
+        left = deadline - time.monotonic()
+        exact_fits = (1 - FIRST_STAGE_SHARE) * left > build_s
+        found = get_solver(first)(_with_time(ctx, FIRST_STAGE_SHARE * left if exact_fits else left))
         if found is not None and _cost(ctx, found.assignment) <= cost:
             best, cost = found, _cost(ctx, found.assignment)
             stages.append(first)
     left = deadline - time.monotonic()
-    if left <= 2 * BUILD_S_PER_CONFLICT * problem.n_conflicts:
+    if left <= build_s:
+        if left > 0 and problem.n_conflicts > ctx.exact_max_conflicts:
+            polished, polished_cost, _ = tabu_search(ctx, best.assignment, budget_s=left)
+            if polished_cost < cost:  # the large solver stopped early (its own 1 s cap)
+                best, stages = replace(best, assignment=polished), [*stages, "tabu"]
         return replace(best, optimal=False, detail=_detail(stages, "no time for CP-SAT"))
     result = solve(
         problem,
