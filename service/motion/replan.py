@@ -13,9 +13,9 @@ the dependency plan of that assignment:
 * :func:`previous_of`: the assignment being executed, as the request's ``previous``;
 * :func:`plan_of`: an answer's assignment as the executor's dependency plan (the
   same decision and staircases as :func:`service.motion.plan.plan_paths` builds);
-* :func:`execute_rescheduled`: the loop, executing a plan and swapping in each
-  new answer's plan at the re-scheduling times (instantly: the simulated clock does
-  not run while the scheduler thinks).
+* :func:`execute_rescheduled`: the loop, executing an answer's plan and swapping in
+  each new answer's plan at the re-scheduling times (instantly: the simulated clock
+  does not run while the scheduler thinks).
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 import numpy as np
+from pydantic import TypeAdapter
 
 from service.core.problem import ProblemError
 from service.core.schemas import (
@@ -54,6 +55,9 @@ log = logging.getLogger(__name__)
 
 # What the loop calls to re-schedule: (previous assignment, progress) -> checked answer.
 Solve = Callable[[list[PreviousConflictIn], ProgressIn], ScheduleResponse]
+# One validation of the whole list: ~30 % faster than a model_validate per entry (~20,000
+# entries at 250 robots).
+_PREVIOUS = TypeAdapter(list[PreviousConflictIn])
 
 
 def progress_at(graph: CoordinationGraph, state: State) -> ProgressIn:
@@ -80,7 +84,7 @@ def progress_at(graph: CoordinationGraph, state: State) -> ProgressIn:
 
 def previous_of(answer: ScheduleResponse) -> list[PreviousConflictIn]:
     """``answer``'s assignment as the ``previous`` of the next re-schedule."""
-    return [PreviousConflictIn.model_validate(a) for a in answer.assignment]
+    return _PREVIOUS.validate_python(answer.assignment)
 
 
 def plan_of(graph: CoordinationGraph, answer: ScheduleResponse) -> DependencyPlan:
@@ -93,15 +97,16 @@ class Replan:
     """One re-schedule of a run: when, how long it took, what it changed.
 
     ``solve_s`` is the scheduler's call alone; ``total_s`` adds reading the state,
-    building the progress and the new dependency plan, and swapping it in.
-    ``error`` is the scheduler's refusal (the run then kept its plan).
+    building the progress and, when the assignment changed, the new dependency plan
+    and swapping it in. ``error`` is the scheduler's refusal (the run then kept its plan).
     """
 
     time: float
     solve_s: float
     total_s: float
-    constraints: int  # of the new plan
-    moot: int  # constraints of the new plan whose waiter had already passed its point
+    changed: bool  # the answer's assignment differs from the one being executed
+    constraints: int  # of the plan executed from now on
+    moot: int  # constraints of a new plan whose waiter had already passed its point
     error: str | None = None
 
 
@@ -115,18 +120,20 @@ class Rescheduled:
 
 def execute_rescheduled(
     graph: CoordinationGraph,
-    plan: DependencyPlan,
-    previous: list[PreviousConflictIn],
+    answer: ScheduleResponse,
     rates: list[Rate],
     solve: Solve,
     times: Iterable[float],
 ) -> Rescheduled:
-    """Execute ``plan`` (whose assignment is ``previous``) and re-schedule at ``times``.
+    """Execute ``answer``'s plan and re-schedule at ``times``.
 
     ``times`` are increasing wall times (an endless one is fine: the loop stops once
-    every robot is done or none can move). A refused re-schedule (ProblemError) is
-    recorded and the run keeps its plan.
+    every robot is done or none can move). An answer with the assignment being
+    executed keeps the running plan; a refused re-schedule (ProblemError) is recorded
+    and the run keeps its plan too.
     """
+    current = decision(graph, answer)
+    plan, previous = dependency_plan(graph, current), previous_of(answer)
     execution = Execution(graph.paths, plan, rates)
     replans: list[Replan] = []
     for t in times:
@@ -143,11 +150,21 @@ def execute_rescheduled(
         except ProblemError as exc:
             log.error("re-schedule at t=%.3f refused: %s", t, exc)
             elapsed = time.perf_counter() - solve_start
-            replans.append(Replan(t, elapsed, time.perf_counter() - start, 0, 0, str(exc)))
+            replans.append(
+                Replan(t, elapsed, time.perf_counter() - start, False, plan.size, 0, str(exc))
+            )
             continue
         solve_s = time.perf_counter() - solve_start
-        new_plan = plan_of(graph, answer)
-        moot = execution.replace_plan(new_plan)
-        previous = previous_of(answer)
-        replans.append(Replan(t, solve_s, time.perf_counter() - start, new_plan.size, moot))
+        new = decision(graph, answer)
+        changed = not (
+            np.array_equal(new.a_first, current.a_first)
+            and np.array_equal(new.following, current.following)
+        )
+        moot = 0
+        if changed:
+            plan, current = dependency_plan(graph, new), new
+            moot = execution.replace_plan(plan)
+            previous = previous_of(answer)
+        total_s = time.perf_counter() - start
+        replans.append(Replan(t, solve_s, total_s, changed, plan.size, moot))
     return Rescheduled(execution.finish(), replans)

@@ -91,15 +91,14 @@ def test_re_scheduling_with_the_same_answer_changes_nothing_and_stops_when_done(
         return answer
 
     plan0 = plan_of(graph, answer)
-    out = execute_rescheduled(
-        graph, plan0, previous_of(answer), [Rate()] * 2, keep, itertools.count(1.0, 1.0)
-    )
+    out = execute_rescheduled(graph, answer, [Rate()] * 2, keep, itertools.count(1.0, 1.0))
     whole = execute(graph.paths, plan0).completion
     np.testing.assert_allclose(out.run.completion, whole)
     last = int(np.ceil(whole.max()))  # every second until the last robot is done
     assert [r.time for r in out.replans] == [float(t) for t in range(1, last)]
     assert [p.time for p in calls] == [r.time for r in out.replans]
     assert all(r.error is None and r.constraints == plan0.size for r in out.replans)
+    assert not any(r.changed for r in out.replans)
 
 
 def test_a_new_order_is_obeyed_from_the_re_schedule_on() -> None:
@@ -109,9 +108,8 @@ def test_a_new_order_is_obeyed_from_the_re_schedule_on() -> None:
     def swap(previous: list[PreviousConflictIn], progress: ProgressIn) -> ScheduleResponse:
         return _swapped(answer)
 
-    out = execute_rescheduled(
-        graph, plan_of(graph, answer), previous_of(answer), [Rate()] * 2, swap, [2.0]
-    )
+    out = execute_rescheduled(graph, answer, [Rate()] * 2, swap, [2.0, 3.0])
+    assert [r.changed for r in out.replans] == [True, False]
     assert out.run.deadlocked == ()
     assert out.run.completion[1] == pytest.approx(10.5)  # b undisturbed
     assert out.run.completion[0] > 10.0  # a waited
@@ -125,7 +123,7 @@ def test_a_refused_re_schedule_is_recorded_and_the_plan_kept() -> None:
         raise ProblemError([ErrorItem(("body", "progress"), "contradiction")])
 
     plan0 = plan_of(graph, answer)
-    out = execute_rescheduled(graph, plan0, previous_of(answer), [Rate()] * 2, refuse, [2.0, 3.0])
+    out = execute_rescheduled(graph, answer, [Rate()] * 2, refuse, [2.0, 3.0])
     assert [r.error is not None for r in out.replans] == [True, True]
     np.testing.assert_allclose(out.run.completion, execute(graph.paths, plan0).completion)
 
@@ -154,9 +152,7 @@ def test_re_scheduling_a_disturbed_warehouse_never_collides_nor_deadlocks() -> N
     for seed in range(3):
         disturbances = PROFILES["heavy"].draw(windows, seed)
         rates = rates_of([p.id for p in graph.paths], disturbances)
-        out = execute_rescheduled(
-            graph, plan0, previous_of(answer), rates, solve, itertools.count(5.0, 5.0)
-        )
+        out = execute_rescheduled(graph, answer, rates, solve, itertools.count(5.0, 5.0))
         assert out.run.deadlocked == ()
         assert all(r.error is None for r in out.replans)
         assert check_clearance(trajectories(graph.paths, out.run)).ok
