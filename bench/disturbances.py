@@ -54,18 +54,19 @@ from bench.report import (
     write_json,
 )
 from service.core.path_schemas import PathsRequest
-from service.core.problem import ProblemError
+from service.core.problem import ErrorItem, ProblemError
 from service.core.schemas import PreviousConflictIn, ProgressIn, ScheduleRequest, ScheduleResponse
 from service.geometry.graph import CoordinationGraph, GeometrySettings
 from service.learning.store import load_all
 from service.motion.plan import derive
-from service.motion.replan import execute_rescheduled, plan_of
+from service.motion.replan import Solve, execute_rescheduled, plan_of
 from service.motion.trajectories import trajectories
 from service.scenarios import KINDS, generate
 from service.simulation.clearance import Clearance, Trajectory, check_clearance
 from service.simulation.disturbances import PROFILES, Disturbance, Rate, played_by_clock, rates_of
 from service.simulation.executor import DependencyPlan, Run, execute
 from service.solvers.dispatch import DispatchPolicy, dispatch
+from service.solvers.rescheduling import Rescheduler
 
 __all__ = ["MODES", "QUICK", "Config", "main", "run"]
 
@@ -141,7 +142,7 @@ def plan_world(kind: str, robots: int, cfg: Config, policy: DispatchPolicy) -> P
     graph = derive(paths_request, GeometrySettings())
     request = graph.to_request(paths_request)
     if request is None:
-        raise ProblemError([])  # no two robots interfere: nothing to disturb
+        raise ProblemError([ErrorItem(("body", "robots"), "no two robots interfere")])
     answer = dispatch(request, policy)
     plan_s = time.perf_counter() - start
     plan = plan_of(graph, answer)
@@ -193,9 +194,14 @@ def replan_times(cfg: Config, disturbances: Sequence[Disturbance]) -> Iterable[f
 
 
 def run_mode(
-    mode: str, planned: Planned, rates: list[Rate], cfg: Config, solve: Any, times: Iterable[float]
+    mode: str,
+    planned: Planned,
+    rates: list[Rate],
+    solve: Solve | None,
+    times: Iterable[float],
 ) -> dict[str, Any]:
-    """One disturbed run in one mode: collisions, deadlocks, completion, re-schedules."""
+    """One disturbed run in one mode: collisions, deadlocks, completion, re-schedules (c
+    calls ``solve`` at ``times``)."""
     start = time.perf_counter()
     replans: list[dict[str, Any]] = []
     if mode == "a":
@@ -206,6 +212,7 @@ def run_mode(
         if mode == "b":
             run: Run = execute(planned.graph.paths, planned.plan, rates)
         else:
+            assert solve is not None, "mode c needs the re-scheduler"
             out = execute_rescheduled(planned.graph, planned.answer, rates, solve, times)
             run = out.run
             replans = [asdict(r) for r in out.replans]
@@ -231,21 +238,23 @@ def _clearance_fields(clearance: Clearance) -> dict[str, Any]:
     }
 
 
+def rescheduling(planned: Planned, cfg: Config, policy: DispatchPolicy) -> Solve:
+    """Mode c's scheduler: one :class:`Rescheduler` per world, ``--replan-budget`` per call."""
+    rescheduler = Rescheduler(planned.request, policy)
+
+    def solve(previous: list[PreviousConflictIn], progress: ProgressIn) -> ScheduleResponse:
+        return rescheduler.solve(
+            previous, progress, time_limit_s=cfg.replan_budget_s, solver=cfg.replan_solver
+        )
+
+    return solve
+
+
 def run_world(
     planned: Planned, cfg: Config, policy: DispatchPolicy, bar: tqdm
 ) -> list[dict[str, Any]]:
     """Every profile, draw and mode of one planned world: one row per run."""
-    solve = None
-    if "c" in cfg.modes:
-        from service.solvers.rescheduling import Rescheduler  # built concurrently (issue 12)
-
-        rescheduler = Rescheduler(planned.request, policy)
-
-        def solve(previous: list[PreviousConflictIn], progress: ProgressIn) -> ScheduleResponse:
-            return rescheduler.solve(
-                previous, progress, time_limit_s=cfg.replan_budget_s, solver=cfg.replan_solver
-            )
-
+    solve = rescheduling(planned, cfg, policy) if "c" in cfg.modes else None
     rows = []
     for profile in cfg.profiles:
         for k in range(draws_of(cfg, planned.robots)):
@@ -253,7 +262,7 @@ def run_world(
             disturbances = draw(planned, profile, seed)
             rates = rates_of(planned.ids, disturbances)
             for mode in cfg.modes:
-                result = run_mode(mode, planned, rates, cfg, solve, replan_times(cfg, disturbances))
+                result = run_mode(mode, planned, rates, solve, replan_times(cfg, disturbances))
                 rows.append(
                     {
                         "kind": planned.kind,
@@ -507,6 +516,7 @@ def plot(summary: Sequence[dict[str, Any]], budget_s: float, path: Path) -> None
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import NullFormatter, ScalarFormatter
 
     fig, axes = plt.subplots(1, 3, figsize=(16, 4.8))
     profiles = list(dict.fromkeys(s["profile"] for s in summary))
@@ -555,10 +565,13 @@ def plot(summary: Sequence[dict[str, Any]], budget_s: float, path: Path) -> None
     )
     axes[2].axhline(1000 * budget_s, color="grey", linestyle=":", label="budget")
     axes[2].set(ylabel="re-schedule latency (ms)", title="c: re-scheduling latency", yscale="log")
+    axes[2].yaxis.set_major_formatter(ScalarFormatter())
+    axes[2].yaxis.set_minor_formatter(NullFormatter())
+    sizes = sorted({s["robots"] for s in summary})
     for ax in axes:
         ax.set(xscale="log", xlabel="robots")
-        sizes = sorted({s["robots"] for s in summary})
         ax.set_xticks(sizes, [str(n) for n in sizes])
+        ax.xaxis.set_minor_formatter(NullFormatter())
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize="small")
     fig.tight_layout()
