@@ -21,6 +21,7 @@ from service.core.schemas import (
     CostsOut,
     Objective,
     OptionsIn,
+    PreviousConflictIn,
     RobotScheduleOut,
     ScheduleRequest,
     SolverInfoOut,
@@ -31,6 +32,8 @@ __all__ = [
     "MAX_RADIUS",
     "MAX_SPEED",
     "PathRobotIn",
+    "PathRobotProgressIn",
+    "PathsProgressIn",
     "PathsRequest",
     "TrajectoryOut",
     "TimingsOut",
@@ -129,14 +132,37 @@ def path_length(path: list[Point]) -> float:
     return sum(math.dist(p, q) for p, q in zip(path[:-1], path[1:], strict=True))
 
 
+class PathRobotProgressIn(BaseModel):
+    """Where one robot is: arc length ``s`` (metres along its path) reached at the time."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    s: float = Field(ge=0.0, le=1e9, allow_inf_nan=False, strict=True)
+
+
+class PathsProgressIn(BaseModel):
+    """The fleet at ``time`` (the paths' clock); robots not listed have not started."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    time: Time
+    robots: dict[Id, PathRobotProgressIn] = Field(default_factory=dict)
+
+
 class PathsRequest(BaseModel):
-    """Body of the paths form of ``POST /v1/schedules`` and ``POST /v1/coordination-graphs``."""
+    """Body of the paths form of ``POST /v1/schedules`` and ``POST /v1/coordination-graphs``.
+
+    With ``progress`` (and optionally ``previous``: the assignment of the answer being
+    executed) it is a re-schedule from ``progress.time`` on (docs/paths.md).
+    """
 
     model_config = ConfigDict(extra="forbid")
 
     objective: Objective = "avg_completion"
     robots: list[PathRobotIn] = Field(min_length=1)
     options: OptionsIn = Field(default_factory=OptionsIn)
+    previous: list[PreviousConflictIn] | None = None
+    progress: PathsProgressIn | None = None
 
     @model_validator(mode="after")
     def _unique_ids(self) -> PathsRequest:

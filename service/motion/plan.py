@@ -37,9 +37,10 @@ from service.core.schemas import (
 from service.geometry.graph import CoordinationGraph, GeometrySettings, build_graph
 from service.geometry.paths import RobotPath
 from service.motion.dependencies import Decision, dependency_plan
+from service.motion.progress import progress_at, state_of
 from service.motion.trajectories import departure_times, realized_costs, trajectories
 from service.simulation.clearance import Clearance, Trajectory, check_clearance
-from service.simulation.executor import DependencyPlan, Run, execute
+from service.simulation.executor import DependencyPlan, Execution, Run, State, execute
 from service.simulation.simulate import plan_to_wire
 from service.solvers.dispatch import DispatchPolicy, InvalidAnswerError, dispatch
 
@@ -109,15 +110,18 @@ def plan_paths(
     limit = request.options.time_limit_s or policy.default_time_limit_s
     due = time.monotonic() + limit if deadline is None else deadline
     graph = derive(request, geometry)
-    graph_request = graph.to_request(request)
+    state = None if request.progress is None else state_of(graph.paths, request.progress)
+    graph_request = _with_progress(graph, graph.to_request(request), request, state)
     graph_done = time.perf_counter()
     answer: ScheduleResponse | None = None
     if graph_request is not None:
         solve_due = max(due - MOTION_SHARE * limit, time.monotonic() + MIN_SOLVE_S)
         answer = dispatch(graph_request, policy, deadline=solve_due)
     solve_done = time.perf_counter()
-    executed = _execute_safely(graph, decision(graph, answer))
-    response = _render(request, graph, graph_request, answer, executed, solve_done - graph_done)
+    executed = _execute_safely(graph, decision(graph, answer), state)
+    response = _render(
+        request, graph, graph_request, answer, executed, solve_done - graph_done, state
+    )
     # Motion: everything after the solve, building this answer included.
     response.timings = TimingsOut(
         graph_s=graph_done - start,
@@ -143,11 +147,30 @@ def decision(graph: CoordinationGraph, answer: ScheduleResponse | None) -> Decis
     return Decision(a_first, following)
 
 
-def _execute_safely(graph: CoordinationGraph, decision: Decision) -> _Executed:
-    """Execute ``decision``, or its all-exclusive version, whichever first runs clean."""
+def _with_progress(
+    graph: CoordinationGraph,
+    graph_request: ScheduleRequest | None,
+    request: PathsRequest,
+    state: State | None,
+) -> ScheduleRequest | None:
+    """The graph request of a re-schedule: ``previous`` and the progress in graph form."""
+    if graph_request is None:
+        return None
+    update: dict[str, object] = {"previous": request.previous}
+    if state is not None:
+        update["progress"] = progress_at(graph, state)
+    return graph_request.model_copy(update=update)
+
+
+def _execute_safely(graph: CoordinationGraph, decision: Decision, state: State | None) -> _Executed:
+    """Execute ``decision`` (from ``state`` on, for a re-schedule), or its all-exclusive
+    version, whichever first runs clean."""
     for candidate in (decision, decision.exclusive()):
         plan = dependency_plan(graph, candidate)
-        run = execute(graph.paths, plan)
+        if state is None:
+            run = execute(graph.paths, plan)
+        else:
+            run = Execution.resume(graph.paths, plan, state).finish()
         if run.deadlocked:
             log.error("plan deadlocked (robots %s); trying all-exclusive", run.deadlocked[:10])
             continue
@@ -168,19 +191,20 @@ def _render(
     answer: ScheduleResponse | None,
     executed: _Executed,
     solve_s: float,
+    state: State | None,
 ) -> PathsScheduleResponse:
-    """The wire answer: the graph answer's fields, re-described by the executed motion."""
+    """The wire answer: the graph answer's fields, re-described by the executed motion
+    (from ``state`` on, for a re-schedule: the dependencies left to obey)."""
     paths, run = graph.paths, executed.run
     ids = graph.node_ids()
     planned = _time_points(graph)
-    realized = [departure_times(run.wall[r], run.clock[r], planned[r]) for r in range(len(paths))]
+    realized = [_departures(run, r, planned[r], state) for r in range(len(paths))]
     costs = realized_costs(run.completion, planned, realized)
     schedule = []
     for r, path in enumerate(paths):
         nodes = np.flatnonzero(graph.node_robot == r)
         enter, exit_ = (
-            departure_times(run.wall[r], run.clock[r], path.time_at(graph.node_span[nodes, k]))
-            for k in (0, 1)
+            _departures(run, r, path.time_at(graph.node_span[nodes, k]), state) for k in (0, 1)
         )
         schedule.append(
             RobotScheduleOut(
@@ -216,8 +240,40 @@ def _render(
             )
             for path, tr in zip(paths, executed.trajectories, strict=True)
         ],
-        dependencies=plan_to_wire(paths, executed.plan),
+        dependencies=plan_to_wire(paths, _ahead(paths, executed.plan, state)),
         timings=TimingsOut(graph_s=0.0, solve_s=solve_s, motion_s=0.0),  # set by the caller
+    )
+
+
+def _departures(run: Run, r: int, planned: np.ndarray, state: State | None) -> np.ndarray:
+    """(P,) when robot r leaves each planned time point (P,): read off the run, except
+    points a re-schedule's robot had passed before ``state.time``, which are estimated
+    like the residual problem does (planned time plus the robot's delay then)."""
+    out = departure_times(run.wall[r], run.clock[r], planned)
+    if state is None or not state.started[r]:
+        return out
+    late = (
+        state.time - state.clock[r] if not state.done[r] else state.completion[r] - state.clock[r]
+    )
+    return np.where(planned < state.clock[r], planned + late, out)
+
+
+def _ahead(paths: list[RobotPath], plan: DependencyPlan, state: State | None) -> DependencyPlan:
+    """The constraints of ``plan`` still to obey from ``state`` on (all without a state):
+    a robot already past its wait point, or done, no longer waits there."""
+    if state is None:
+        return plan
+    wait_clock = np.array(
+        [
+            paths[w].time_at(s)
+            for w, s in zip(plan.waiter.tolist(), plan.wait_s.tolist(), strict=True)
+        ]
+    )  # (D,)
+    keep = ~state.done[plan.waiter] & (
+        ~state.started[plan.waiter] | (wait_clock >= state.clock[plan.waiter])
+    )
+    return DependencyPlan(
+        plan.waiter[keep], plan.wait_s[keep], plan.waitee[keep], plan.until_s[keep]
     )
 
 

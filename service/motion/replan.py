@@ -32,14 +32,14 @@ from service.core.problem import ProblemError
 from service.core.schemas import (
     PreviousConflictIn,
     ProgressIn,
-    RobotProgressIn,
     ScheduleResponse,
 )
 from service.geometry.graph import CoordinationGraph
 from service.motion.dependencies import dependency_plan
 from service.motion.plan import decision
+from service.motion.progress import progress_at
 from service.simulation.disturbances import Rate
-from service.simulation.executor import DependencyPlan, Execution, Run, State
+from service.simulation.executor import DependencyPlan, Execution, Run
 
 __all__ = [
     "Replan",
@@ -58,28 +58,6 @@ Solve = Callable[[list[PreviousConflictIn], ProgressIn], ScheduleResponse]
 # One validation of the whole list: ~30 % faster than a model_validate per entry (~20,000
 # entries at 250 robots).
 _PREVIOUS = TypeAdapter(list[PreviousConflictIn])
-
-
-def progress_at(graph: CoordinationGraph, state: State) -> ProgressIn:
-    """The graph-form progress of the graph's robots in ``state``.
-
-    Robots whose start time has not come are left out (not started). A robot that
-    is done has passed everything and ran ``completion - finish`` late. A robot
-    standing at progress clock 0 has passed nothing and cannot say so (times are
-    >= 0): it is left out too, which the scheduler reads as "cannot reach any point
-    before ``state.time``".
-    """
-    robots = {}
-    for r in graph.robots_in_graph().tolist():
-        path, clock = graph.paths[r], float(state.clock[r])
-        if not state.started[r] or (clock <= 0.0 and not state.done[r]):
-            continue
-        if state.done[r]:
-            passed, delay = path.finish_time, float(state.completion[r]) - path.finish_time
-        else:
-            passed, delay = float(np.nextafter(clock, -np.inf)), state.time - clock
-        robots[path.id] = RobotProgressIn(passed_until=passed, delay=max(delay, 0.0))
-    return ProgressIn(time=state.time, robots=robots)
 
 
 def previous_of(answer: ScheduleResponse) -> list[PreviousConflictIn]:

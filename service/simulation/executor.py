@@ -121,6 +121,44 @@ class Execution:
         for r, path in enumerate(paths):
             self._push(path.start_time, r, -1, path.start_time)
 
+    @classmethod
+    def resume(
+        cls,
+        paths: Sequence[RobotPath],
+        plan: DependencyPlan,
+        state: State,
+        rates: Sequence[Rate] | None = None,
+    ) -> Execution:
+        """A run from ``state`` on (robots where a fleet reports them at ``state.time``),
+        under ``plan``: a re-scheduled answer executed from now.
+
+        Started robots stand at their clocks at ``state.time`` (constraints whose waiter
+        is already past its wait point are moot); done robots keep their completion; the
+        others appear at their first point at their start time, or now if that has passed.
+        """
+        run = cls(paths, DependencyPlan.empty(), rates)
+        run.now, run.events = state.time, []
+        for r, path in enumerate(paths):
+            run.started[r], run.done[r] = bool(state.started[r]), bool(state.done[r])
+            if state.done[r]:  # one waypoint at its arrival: gone from then on
+                run.clock[r], run.completion[r] = path.finish_time, float(state.completion[r])
+                run.wall[r] = run.completion[r]
+                run._record(r)
+            elif state.started[r]:
+                run.clock[r], run.wall[r] = float(state.clock[r]), state.time
+                run._record(r)
+            else:
+                run.wall[r] = max(path.start_time, state.time)
+                run._push(run.wall[r], r, -1, path.start_time)
+        run._load(plan)
+        for r in range(len(paths)):
+            if run.started[r]:
+                run._reach(r)
+        for r in range(len(paths)):
+            if run.started[r] and not run.done[r]:
+                run._schedule(r)
+        return run
+
     def _load(self, plan: DependencyPlan) -> int:
         """Index ``plan``'s constraints; drop those whose waiter is past its wait point or
         done (moot). Returns how many were dropped."""
