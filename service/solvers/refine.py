@@ -25,7 +25,7 @@ import time
 
 import numpy as np
 
-from service.solvers.gnn_vae import DEFAULT_SAMPLES, sample_model
+from service.solvers.gnn_vae import DEFAULT_SAMPLES, embed_fits, sample_model
 from service.solvers.registry import SolveContext, SolverOutput, register
 from service.solvers.tabu import plain_start, tabu_search
 
@@ -44,15 +44,23 @@ def gnn_vae_refined(ctx: SolveContext) -> SolverOutput | None:
     start = time.perf_counter()
     budget = min(REFINE_SECONDS, ctx.time_limit_s)
     samples = ctx.samples or DEFAULT_SAMPLES
-    # The samples get at most half the budget; tabu the rest.
-    sampled = sample_model(ctx, stored, samples, time.monotonic() + budget / 2)
-    best, best_cost, iterations = sampled.assignment, np.inf, 0
-    for k, tabu_start in enumerate((sampled.assignment, plain_start(ctx))):
-        left = (budget - (time.perf_counter() - start)) / (2 - k)  # half now, the rest next
+    # The samples get at most half the budget; tabu the rest. A graph whose model trunk
+    # would outlast that half gets no samples: tabu from FCFS has the whole budget.
+    starts = [plain_start(ctx)]
+    sampled = None
+    if embed_fits(ctx, budget / 2):
+        sampled = sample_model(ctx, stored, samples, time.monotonic() + budget / 2)
+        starts.insert(0, sampled.assignment)
+    best, best_cost, iterations = starts[0], np.inf, 0
+    for k, tabu_start in enumerate(starts):
+        left = (budget - (time.perf_counter() - start)) / (len(starts) - k)  # shared
         found, cost, runs = tabu_search(ctx, tabu_start, budget_s=max(left, 0.0))
         iterations += runs
         if cost < best_cost:
             best, best_cost = found, cost
+    if sampled is None:
+        detail = f"graph too large for the model in the budget: {iterations} tabu iterations"
+        return SolverOutput(best, model=stored.name, samples=0, detail=detail)
     detail = (
         f"best of {sampled.samples} of {samples} samples (at most half the budget), "
         f"then {iterations} tabu iterations from it and from FCFS"
