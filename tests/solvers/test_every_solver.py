@@ -30,7 +30,7 @@ SLACK_S = 1.5  # a correctness bound on overrunning the limit, not a performance
 
 
 def test_the_registry_is_the_wire_contract() -> None:
-    assert set(solver_names()) == set(get_args(SolverName)) - {"auto"}
+    assert set(solver_names()) == set(get_args(SolverName))
 
 
 def _request(family: str, seed: int, robots: int, density: float) -> dict:
@@ -41,7 +41,7 @@ def _request(family: str, seed: int, robots: int, density: float) -> dict:
     return stitched_problem(seed, robots, density)
 
 
-@pytest.mark.parametrize("name", sorted(set(get_args(SolverName)) - {"auto"}))
+@pytest.mark.parametrize("name", sorted(get_args(SolverName)))
 @settings(
     max_examples=6, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow]
 )
