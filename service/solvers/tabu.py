@@ -6,8 +6,10 @@ type; only moves that keep the assignment valid are considered
 turning following-type fits every clique's budget), so every visited
 assignment is valid. Each iteration
 draws a candidate list of ``moves`` moves, evaluates its feasible ones in one
-batched call and takes the best admissible one, even if it is worse than the
-current assignment (that is what lets tabu search leave local optima). The
+call (incrementally: :class:`IncrementalEvaluator` recomputes only what lies
+downstream of each moved conflict) and takes the best admissible one, even if
+it is worse than the current assignment (that is what lets tabu search leave
+local optima). The
 list holds the moves of *binding* conflicts first (those whose constraint is
 what makes a robot wait, :meth:`Evaluator.binding`, the analogue of a
 critical-path neighbourhood in job-shop scheduling), then random moves: on 12
@@ -30,6 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from service.core.assignment import Assignments
+from service.core.incremental import IncrementalEvaluator, apply_moves
 from service.solvers.fcfs import fcfs
 from service.solvers.registry import SolveContext, SolverOutput, register
 
@@ -45,18 +48,6 @@ class TabuConfig:
     tenure_spread: int = 7  # plus a uniform draw from 0..tenure_spread
     max_iterations: int = 1000
     patience: int = 200  # iterations without a new best before stopping
-
-
-def _neighbours(current: Assignments, moves: np.ndarray) -> Assignments:
-    """The assignments one move away. Shapes: moves (K,) in 0..2M-1 -> K assignments."""
-    n_conf = current.a_first.shape[1]
-    rows = np.arange(moves.size)
-    a_first = np.repeat(current.a_first, moves.size, axis=0)  # (K, M)
-    following = np.repeat(current.following, moves.size, axis=0)  # (K, M)
-    flip_dir, conflict = moves < n_conf, moves % n_conf
-    a_first[rows[flip_dir], conflict[flip_dir]] ^= True
-    following[rows[~flip_dir], conflict[~flip_dir]] ^= True
-    return Assignments(a_first, following)
 
 
 def _candidates(
@@ -92,6 +83,7 @@ def tabu_search(
     rng = np.random.default_rng(ctx.seed)
     graph = ctx.orientation
     evaluate = ctx.evaluator.evaluate
+    neighbour_costs = IncrementalEvaluator(ctx.evaluator).costs
     n_moves = 2 * ctx.problem.n_conflicts
     p = ctx.problem
     movable = np.concatenate([p.forced == 0, p.fixed_type < 0])  # (2M,) flips, then type moves
@@ -110,19 +102,19 @@ def tabu_search(
         moves = moves[graph.feasible(current.a_first[0], current.following[0], moves)]
         if moves.size == 0:
             continue
-        neighbours = _neighbours(current, moves)
-        evaluation = evaluate(neighbours)
-        costs = evaluation.costs[ctx.objective]  # (K,)
+        costs = neighbour_costs(current, evaluation, moves)[ctx.objective]  # (K,)
         conflict = moves % ctx.problem.n_conflicts
         admissible = (tabu_until[conflict] <= it) | (costs < best_cost)
         if not admissible.any():
             continue
         k = int(np.flatnonzero(admissible)[np.argmin(costs[admissible])])
-        current = neighbours.take(k)
-        binding = np.flatnonzero(ctx.evaluator.binding(neighbours, evaluation, k))
+        current = apply_moves(current, moves[k : k + 1])
+        evaluation = evaluate(current)  # the next base: its least delays and binding conflicts
+        binding = np.flatnonzero(ctx.evaluator.binding(current, evaluation))
         tabu_until[conflict[k]] = it + cfg.tenure + rng.integers(cfg.tenure_spread + 1)
-        if costs[k] < best_cost:
-            best, best_cost, stale = current, float(costs[k]), 0
+        cost = float(evaluation.costs[ctx.objective][0])
+        if cost < best_cost:
+            best, best_cost, stale = current, cost, 0
     return best, best_cost, it
 
 
