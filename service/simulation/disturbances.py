@@ -17,6 +17,7 @@ uniform over ``factor``:
 =========  ==================  ==================  =================================
 profile    late start          stop                slow-down
 =========  ==================  ==================  =================================
+none       (none: the control)
 light      10 %, mean 5 s      10 %, mean 5 s      10 %, mean 10 s, factor 0.5-0.9
 heavy      30 %, mean 20 s     30 %, mean 20 s     30 %, mean 30 s, factor 0.2-0.6
 =========  ==================  ==================  =================================
@@ -199,7 +200,9 @@ class Profile:
 # Benchmark profiles (issue 12): "light" is a few seconds for about one robot in ten per
 # kind (a person crossing, a slow turn), "heavy" tens of seconds for a third (a blocked
 # aisle, a manual intervention). Chosen for the benchmark, not measured on a fleet.
+# "none" is the control: what re-scheduling does without any disturbance.
 PROFILES = {
+    "none": Profile(Hazard(0.0, 1.0), Hazard(0.0, 1.0), Hazard(0.0, 1.0)),
     "light": Profile(Hazard(0.1, 5.0), Hazard(0.1, 5.0), Hazard(0.1, 10.0, (0.5, 0.9))),
     "heavy": Profile(Hazard(0.3, 20.0), Hazard(0.3, 20.0), Hazard(0.3, 30.0, (0.2, 0.6))),
 }
