@@ -27,7 +27,7 @@ from service.core.assignment import Assignments
 from service.core.problem import Problem
 from service.core.schemas import OBJECTIVES, Objective
 
-__all__ = ["Evaluation", "Evaluator", "costs_from_completion"]
+__all__ = ["ConstraintGraph", "Evaluation", "Evaluator", "costs_from_completion"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -44,6 +44,23 @@ class Evaluation:
     completion: np.ndarray
     costs: dict[Objective, np.ndarray]
     converged: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class ConstraintGraph:
+    """The event graph the evaluator walks, for evaluators that re-walk part of it
+    (:mod:`service.core.incremental`) with the same constraint definitions.
+
+    Shapes: E events, M conflicts (slot 2c+s constrains side s of conflict c), R robots.
+    """
+
+    chain_next: np.ndarray  # (E,) next event of the same robot, or -1
+    target: np.ndarray  # (2M,) event each slot constrains
+    source: np.ndarray  # (2, 2M) event each slot reads, by type (0 exclusive, 1 following)
+    offset: np.ndarray  # (2, 2M) T(source) - T(target), by type
+    live: np.ndarray  # (2M,) bool, False for the slots of realized conflicts
+    last_event: np.ndarray  # (R,) each robot's completion event (E: none)
+    delay_weight: np.ndarray  # (E+1,) avg_delay = event delays @ delay_weight
 
 
 def costs_from_completion(completion: np.ndarray) -> dict[str, np.ndarray]:
@@ -188,6 +205,19 @@ class Evaluator:
         self._src_foll = tp_event[first_pe].ravel()
         self._off_excl = (t[first_px] - t[pe]).ravel()
         self._off_foll = (t[first_pe] - t[pe]).ravel()
+
+    @property
+    def graph(self) -> ConstraintGraph:
+        """The event graph this evaluator walks."""
+        return ConstraintGraph(
+            self._chain_next,
+            self._target,
+            np.stack([self._src_excl, self._src_foll]),
+            np.stack([self._off_excl, self._off_foll]),
+            self._live,
+            self._last_event,
+            self._delay_weight,
+        )
 
     def evaluate(self, assignments: Assignments) -> Evaluation:
         """Least updated times and costs of every assignment in the batch."""

@@ -341,21 +341,20 @@ class IncrementalEvaluator:
         self.evaluator = evaluator
         problem = evaluator.problem
         n_events = evaluator.n_events
-        chain_next = evaluator._chain_next  # (E,)
+        graph = evaluator.graph
+        chain_next = graph.chain_next  # (E,)
         chain_prev = np.full(n_events, -1, dtype=np.int64)  # (E,) previous event of the robot
         has_next = chain_next >= 0
         chain_prev[chain_next[has_next]] = np.flatnonzero(has_next)
         last_robot = np.full(n_events + 1, -1, dtype=np.int64)  # (E+1,) robot ending there
-        last_robot[evaluator._last_event] = np.arange(problem.n_robots)
+        last_robot[graph.last_event] = np.arange(problem.n_robots)
         last_robot[n_events] = -1  # robots without events never change
         # What every kernel reads: chain_next (E,), chain_prev (E,), target (2M,), source and
         # offset (2, 2M) by type (0 exclusive, 1 following), live (2M,), last_robot (E+1,),
         # completion without delay (R,), avg_delay weight (E+1,).
         self._graph = (
-            chain_next, chain_prev, evaluator._target,
-            np.stack([evaluator._src_excl, evaluator._src_foll]),  # (2, 2M) source by type
-            np.stack([evaluator._off_excl, evaluator._off_foll]),  # (2, 2M) offset by type
-            evaluator._live, last_robot, problem.tp_time[problem.last_tp], evaluator._delay_weight,
+            chain_next, chain_prev, graph.target, graph.source, graph.offset, graph.live,
+            last_robot, problem.tp_time[problem.last_tp], graph.delay_weight,
         )  # fmt: skip
 
     def costs(
