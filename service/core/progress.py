@@ -13,9 +13,9 @@ on it unchanged) with three things changed:
   ``delay`` late and cannot reach a point before ``time``. Both shifts keep each
   robot's times strictly increasing and its delay never decreasing (a_r <= u_r).
 * **settled directions**: once a robot has passed its pair enter of a conflict
-  it went first: the conflict's direction is fixed (``Problem.forced``). With
-  ``previous`` the direction must agree with it (else the progress contradicts
-  the plan being executed: 422).
+  it went first: the conflict's direction is fixed (``Problem.forced``), also
+  against ``previous`` (the past wins; a fixed ``first`` of the request that the
+  progress contradicts is a 422).
 * **realized conflicts**: both robots passed their pair enter: the decision lies
   in the past. Its direction and type are fixed (``previous``'s, else read off
   the estimated times) and its constraint, which only concerns passed points, is
@@ -188,8 +188,15 @@ def _shifts(problem: Problem, progress: Progress) -> tuple[np.ndarray, np.ndarra
 def residual_problem(problem: Problem, progress: Progress, previous: Assignments | None) -> Problem:
     """The problem from ``progress.time`` on (see the module docstring).
 
+    Where the progress contradicts ``previous`` (a robot passed a conflict's entry
+    that ``previous`` gave to the other robot, which has not entered it), the past
+    wins: fleets report positions with some slack, and the dependency plan of the paths
+    form waits at meeting places, not exactly at the graph's pair enter points. The
+    direction is settled as it happened and ``previous`` is then no warm start.
+
     Raises:
-        ProblemError: the progress contradicts ``previous`` or a fixed direction.
+        ProblemError: the progress contradicts a fixed direction of the request, or the
+            orders it settles form a circular wait.
     """
     tp_time, tp_passed = _shifts(problem, progress)
     entered = tp_passed[problem.tp_pair_enter]  # (M, 2) side passed its pair enter
@@ -198,7 +205,7 @@ def residual_problem(problem: Problem, progress: Progress, previous: Assignments
     forced = problem.forced.copy()
     one = entered.any(axis=1) & ~realized
     settled = np.where(entered[:, 0], 1, -1).astype(np.int8)  # who entered goes first
-    _check_agrees(problem, forced, one, settled, previous)
+    _check_agrees(problem, forced, one, settled)
     forced[one] = settled[one]
     forced[realized] = np.where(a_first[realized], 1, -1)
     fixed_type = np.where(realized, following.astype(np.int8), -1).astype(np.int8)
@@ -228,16 +235,15 @@ def _settled(
 ) -> tuple[np.ndarray, np.ndarray]:
     """(M,) direction and type of every conflict as far as the past decides them.
 
-    Realized conflicts take ``previous``'s decision; without it, the side whose pair
-    enter came first (estimated times) went first, and the conflict was following
-    exactly when the second entered before the first had left.
+    Realized conflicts take ``previous``'s decision; without it, the request's fixed
+    direction or else the side whose pair enter came first (estimated times), and the
+    conflict was following exactly when the second entered before the first had left.
+    (A realized conflict constrains no future time, so its type only counts for density.)
     """
     if previous is not None:
-        a_first, following = previous.a_first[0].copy(), previous.following[0].copy()
-        _check_realized(problem, tp_passed, realized, a_first, following)
-        return a_first, following
+        return previous.a_first[0].copy(), previous.following[0].copy()
     enter = tp_time[problem.tp_pair_enter]  # (M, 2)
-    a_first = enter[:, 0] <= enter[:, 1]
+    a_first = np.where(problem.forced != 0, problem.forced > 0, enter[:, 0] <= enter[:, 1])
     first = np.where(a_first, 0, 1)
     rows = np.arange(problem.n_conflicts)
     first_left = tp_passed[problem.tp_pair_exit[rows, first]] & (
@@ -246,43 +252,20 @@ def _settled(
     return a_first, ~first_left
 
 
-def _check_realized(
-    problem: Problem,
-    tp_passed: np.ndarray,
-    realized: np.ndarray,
-    a_first: np.ndarray,
-    following: np.ndarray,
-) -> None:
-    """A realized exclusive conflict: its first robot must have passed its pair exit."""
-    rows = np.arange(problem.n_conflicts)
-    first = np.where(a_first, 0, 1)
-    left = tp_passed[problem.tp_pair_exit[rows, first]]
-    bad = np.flatnonzero(realized & ~following & ~left)
-    if bad.size:
-        raise ProblemError([_contradiction(problem, m, 1 - first[m], "left it") for m in bad[:50]])
-
-
 def _check_agrees(
-    problem: Problem,
-    forced: np.ndarray,
-    one: np.ndarray,
-    settled: np.ndarray,
-    previous: Assignments | None,
+    problem: Problem, forced: np.ndarray, one: np.ndarray, settled: np.ndarray
 ) -> None:
-    """Where one robot entered first, ``previous`` and fixed directions must say so too."""
+    """Where one robot entered first, a fixed direction of the request must say so too."""
     bad = one & (forced != 0) & (forced != settled)
-    if previous is not None:
-        prev = np.where(previous.a_first[0], 1, -1)
-        bad |= one & (prev != settled)
     if bad.any():
         errors = [
-            _contradiction(problem, m, 0 if settled[m] > 0 else 1, "entered")
+            _contradiction(problem, m, 0 if settled[m] > 0 else 1)
             for m in np.flatnonzero(bad)[:50].tolist()
         ]
         raise ProblemError(errors)
 
 
-def _contradiction(problem: Problem, m: int, side: int, what: str) -> ErrorItem:
+def _contradiction(problem: Problem, m: int, side: int) -> ErrorItem:
     """The error naming the robot that passed a conflict's entry out of turn."""
     nodes = (problem.conf_a[m], problem.conf_b[m])
     robot = problem.robot_ids[problem.node_robot[nodes[side]]]
@@ -290,8 +273,7 @@ def _contradiction(problem: Problem, m: int, side: int, what: str) -> ErrorItem:
     return _error(
         ("progress", "robots", robot, "passed_until"),
         f"robot '{robot}' passed the entry of conflict {m} ('{problem.node_ids[nodes[side]]}') "
-        f"before robot '{other}' {what}, against the order being executed "
-        "(previous, or the conflict's fixed first)",
+        f"before robot '{other}' entered it, against the conflict's fixed first",
     )
 
 

@@ -224,7 +224,7 @@ def test_delay_shifts_the_rest_of_a_robot_and_time_bounds_a_waiting_robot() -> N
         ),
         (
             {
-                "previous": [{"from": "r0/0", "to": "r1/0", "type": "exclusive"}],
+                "conflicts": [{"a": "r0/0", "b": "r1/0", "first": "a"}],
                 "progress": {"time": 13.0, "robots": {"r1": {"passed_until": 12.0}}},
             },
             ["body", "progress", "robots", "r1", "passed_until"],
@@ -243,6 +243,22 @@ def test_bad_progress_is_a_422_naming_the_field(body: dict[str, Any], loc: list[
     with pytest.raises(ProblemError) as err:
         dispatch(ScheduleRequest.model_validate(req), DispatchPolicy())
     assert [e.as_dict()["loc"] for e in err.value.errors][0] == loc
+
+
+def test_the_past_wins_over_a_previous_answer_it_contradicts() -> None:
+    """r1 entered the section previous gave to r0, which has not: r1 keeps it."""
+    req = {
+        "robots": [
+            {"id": "r0", "nodes": [{"id": "r0/0", "enter": 10.0, "exit": 20.0}]},
+            {"id": "r1", "nodes": [{"id": "r1/0", "enter": 12.0, "exit": 22.0}]},
+        ],
+        "conflicts": [{"a": "r0/0", "b": "r1/0"}],
+        "previous": [{"from": "r0/0", "to": "r1/0", "type": "exclusive"}],
+        "progress": {"time": 13.0, "robots": {"r1": {"passed_until": 12.0}}},
+    }
+    answer = dispatch(ScheduleRequest.model_validate(req), DispatchPolicy())
+    assert answer.assignment[0]["from"] == "r1/0"
+    assert answer.checks.forced
 
 
 def test_negative_delay_is_rejected_by_the_schema() -> None:
