@@ -184,6 +184,11 @@ class Profile:
     stop: Hazard
     slow_down: Hazard
 
+    @property
+    def quiet(self) -> bool:
+        """It hits nobody: every draw is empty (one run tells all)."""
+        return not any(h.share for h in (self.late_start, self.stop, self.slow_down))
+
     def draw(self, windows: Sequence[Window], seed: int) -> list[Disturbance]:
         """Seeded disturbances of the robots of ``windows``: late starts at each window's
         start, stops and slow-downs beginning uniformly inside it."""

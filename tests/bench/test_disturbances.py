@@ -104,12 +104,15 @@ def test_a_tiny_run_writes_everything_and_b_and_c_never_collide(tmp_path: Path) 
     for name in ("tables.md", "results.json", "results.csv", "disturbances.png"):
         assert (out / name).stat().st_size > 0
     rows = json.loads((out / "results.json").read_text())["rows"]
-    assert len(rows) == 2 * 2 * 3  # profiles x draws x modes
+    assert len(rows) == (1 + 2 + 2) * 3  # (the control once, 2 draws of 2 profiles) x modes
     assert not failures(rows) and not refusals(rows)
     c_runs = [r for r in rows if r["mode"] == "c"]
     assert all(r["replans"] for r in c_runs)
     assert all(p["time"] % 10.0 == 0.0 for r in c_runs for p in r["replans"])
     undisturbed = rows[0]["undisturbed_mean"]
     assert all(r["mean_completion"] >= undisturbed - 1e-6 for r in rows if r["mode"] == "b")
+    control = [r for r in rows if r["profile"] == "none"]
+    assert [r["disturbances"] for r in control] == [0, 0, 0]
+    assert not any(r["collided"] for r in control)  # undisturbed playback is the plan
     assert "No collision and no deadlock" in (out / "tables.md").read_text()
     assert main([*argv, "--summarize"]) == 0  # re-renders from the raw results

@@ -53,7 +53,8 @@ def test_heavy_hits_more_robots_for_longer_than_light() -> None:
 
 
 def test_the_control_draws_nothing() -> None:
-    assert PROFILES["none"].draw(WINDOWS[:100], 0) == []
+    assert PROFILES["none"].quiet and PROFILES["none"].draw(WINDOWS[:100], 0) == []
+    assert not PROFILES["light"].quiet
 
 
 def test_rates_follow_the_robot_order_and_combine_pieces() -> None:
