@@ -44,11 +44,12 @@ def gnn_vae_refined(ctx: SolveContext) -> SolverOutput | None:
     start = time.perf_counter()
     budget = min(REFINE_SECONDS, ctx.time_limit_s)
     samples = ctx.samples or DEFAULT_SAMPLES
-    # The samples get at most half the budget; tabu the rest. A graph whose model trunk
-    # would outlast that half gets no samples: tabu from FCFS has the whole budget.
+    # The samples get at most half the budget (the first chunk always runs: at least the
+    # trunk); tabu the rest. A graph whose trunk would outlast the budget gets no samples:
+    # tabu from FCFS has it all.
     starts = [plain_start(ctx)]
     sampled = None
-    if embed_fits(ctx, budget / 2):
+    if embed_fits(ctx, budget):
         sampled = sample_model(ctx, stored, samples, time.monotonic() + budget / 2)
         starts.insert(0, sampled.assignment)
     best, best_cost, iterations = starts[0], np.inf, 0
