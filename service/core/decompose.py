@@ -46,6 +46,8 @@ def parts(problem: Problem) -> list[Part]:
     _, label = connected_components(graph, directed=False)  # (R,)
     conf_label = label[robot_a]  # (M,)
     sizes = np.bincount(conf_label, minlength=label.max(initial=0) + 1)  # conflicts per component
+    if np.count_nonzero(sizes) <= 1:  # one component: the problem itself, not a copy
+        return [Part(problem, np.arange(problem.n_conflicts))] if problem.n_conflicts else []
     order = np.argsort(-sizes, kind="stable")
     return [
         _restrict(problem, label == c, np.flatnonzero(conf_label == c)) for c in order if sizes[c]
