@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import logging
 import os
 import time
@@ -236,5 +237,9 @@ def warm_up(runtime: Runtime) -> None:
         runtime.detail = f"warm-up failed: {type(exc).__name__}: {exc}"
         log.exception("not ready: warm-up failed")
         return
+    # Everything alive now (models, compiled kernels, the app) lives as long as the
+    # process: moved out of the cyclic collector's reach, so full collections walk only
+    # what requests allocate (full collections were 0.5 s pauses at 250 robots).
+    gc.freeze()
     runtime.ready, runtime.detail = True, "ready"
     log.info("ready: warm-up took %.2f s", time.perf_counter() - start)
