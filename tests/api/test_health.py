@@ -112,7 +112,7 @@ async def test_not_ready_when_large_solver_is_not_registered(serve: Serve) -> No
 
 
 class BlockingSolver:
-    """Stands in for ``exact``: blocks until released, then answers with FCFS."""
+    """Stands in for ``auto`` (and ``exact``): blocks until released, then answers with FCFS."""
 
     def __init__(self) -> None:
         self.entered = 0
@@ -131,7 +131,9 @@ class BlockingSolver:
     def install(self, monkeypatch: pytest.MonkeyPatch) -> None:
         real = dispatch_module.get_solver
         monkeypatch.setattr(
-            dispatch_module, "get_solver", lambda name: self if name == "exact" else real(name)
+            dispatch_module,
+            "get_solver",
+            lambda name: self if name in ("auto", "exact") else real(name),
         )
 
 

@@ -76,9 +76,9 @@ async def test_metrics_count_requests_solves_sizes_and_rejections(
     assert latency == 2
     assert not [k for k in samples if dict(k[1]).get("route") in PROBE_ROUTES]
 
-    assert value(samples, "scheduler_solves_total", solver="exact", outcome="optimal") == 1
+    assert value(samples, "scheduler_solves_total", solver="auto", outcome="optimal") == 1
     assert value(samples, "scheduler_solves_total", solver="gnn_vae", outcome="fallback") == 1
-    assert value(samples, "scheduler_solve_duration_seconds_count", solver="exact") == 1
+    assert value(samples, "scheduler_solve_duration_seconds_count", solver="auto") == 1
     # Problems within the caps: the two answered, the one breaking a rule, the one failing.
     assert value(samples, "scheduler_problem_size_count", dimension="robots") == 4
     assert value(samples, "scheduler_problem_size_sum", dimension="conflicts") == 4 * 3
@@ -98,7 +98,7 @@ async def test_metrics_count_requests_solves_sizes_and_rejections(
 
 
 async def test_each_app_has_its_own_registry(serve: Serve, tiny: dict[str, Any]) -> None:
-    solved = {"solver": "exact", "outcome": "optimal"}
+    solved = {"solver": "auto", "outcome": "optimal"}
     async with serve() as first, serve() as second:
         assert (await post_json(first, tiny)).status_code == 200
         assert value(await scrape(first), "scheduler_solves_total", **solved) == 1

@@ -45,7 +45,7 @@ def test_every_log_line_is_json_with_one_line_per_request(server: str, tmp_path:
     solved, refused = access
     assert solved["request_id"] == "trace-2" and solved["status"] == 200
     assert (solved["robots"], solved["nodes"], solved["conflicts"]) == (3, 5, 3)
-    assert solved["solver"] == "auto" and solved["answered_by"] == "exact"
+    assert solved["solver"] == "auto" and solved["answered_by"] == "auto"
     assert solved["queue_s"] >= 0 and solved["solve_s"] > 0 and solved["outcome"] == "optimal"
     assert refused["status"] == 422 and refused["outcome"] == "validation"
     assert len(refused["request_id"]) == 32  # generated
