@@ -518,7 +518,7 @@ def plot(summary: Sequence[dict[str, Any]], budget_s: float, path: Path) -> None
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from matplotlib.ticker import NullFormatter, ScalarFormatter
+    from matplotlib.ticker import NullFormatter
 
     fig, axes = plt.subplots(1, 3, figsize=(16, 4.8))
     profiles = list(dict.fromkeys(s["profile"] for s in summary))
@@ -566,9 +566,7 @@ def plot(summary: Sequence[dict[str, Any]], budget_s: float, path: Path) -> None
         ylabel="runs with a collision (%)", title="a: clock playback collides", ylim=(-5, 105)
     )
     axes[2].axhline(1000 * budget_s, color="grey", linestyle=":", label="budget")
-    axes[2].set(ylabel="re-schedule latency (ms)", title="c: re-scheduling latency", yscale="log")
-    axes[2].yaxis.set_major_formatter(ScalarFormatter())
-    axes[2].yaxis.set_minor_formatter(NullFormatter())
+    axes[2].set(ylabel="re-schedule latency (ms)", title="c: re-scheduling latency", ylim=(0, None))
     sizes = sorted({s["robots"] for s in summary})
     for ax in axes:
         ax.set(xscale="log", xlabel="robots")

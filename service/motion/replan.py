@@ -6,10 +6,11 @@ progress, the scheduler answers a new assignment from that moment on (realized
 decisions keep their direction, docs/contract.md), and the robots continue under
 the dependency plan of that assignment:
 
-* :func:`progress_at`: an executor :class:`State` at wall time t as the graph
-  form's ``progress``: a present robot at progress clock c (the planned time of
-  where it stands) has passed every time point planned before c (not at c: a robot
-  standing exactly at a wait point has not passed it) and runs ``t - c`` late;
+* :func:`progress_at` (from :mod:`service.motion.progress`): an executor ``State``
+  at wall time t as the graph form's ``progress``: a present robot at progress clock
+  c (the planned time of where it stands) has passed every time point planned
+  before c (not at c: a robot standing exactly at a wait point has not passed it)
+  and runs ``t - c`` late;
 * :func:`previous_of`: the assignment being executed, as the request's ``previous``;
 * :func:`plan_of`: an answer's assignment as the executor's dependency plan (the
   same decision and staircases as :func:`service.motion.plan.plan_paths` builds);
