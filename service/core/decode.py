@@ -29,6 +29,8 @@ choice from scores 1 (following) / 0 (exclusive) with threshold 0.5.
 
 from __future__ import annotations
 
+import copy
+
 import numba
 import numpy as np
 
@@ -160,6 +162,16 @@ class Decoder:
         self._build_binding_table()
         if problem.has_forced:
             self._build_forced_graph()
+
+    def for_problem(self, problem: Problem) -> Decoder:
+        """This decoder for another problem on the same graph and cliques (a re-schedule's
+        residual problem): the clique tables are shared, only the fixed-direction graph
+        is rebuilt (the binding table took 85 ms of a 250-robot re-schedule)."""
+        out = copy.copy(self)
+        out.problem = problem
+        if problem.has_forced:
+            out._build_forced_graph()
+        return out
 
     def _build_forced_graph(self) -> None:
         """Path predecessors, fixed in-arcs and a topological order, for :meth:`repair`."""

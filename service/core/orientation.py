@@ -24,6 +24,7 @@ numba-compiled because both searches call them thousands of times per request.
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 
 import numba
@@ -264,8 +265,15 @@ class OrientationGraph:
             cliques.edge, cliques.clique_of_incidence, n_conf
         )  # conflict -> its cliques
         self.may_follow = ~cliques.forbidden()  # (M,)
-        # (M,) int8 orientation of the fixed conflicts (1 a->b, 0 b->a), UNSET elsewhere
-        self.base = np.where(problem.forced == 0, UNSET, problem.forced > 0).astype(np.int8)
+        self.base = _fixed_orientation(problem)
+
+    def for_problem(self, problem: Problem) -> OrientationGraph:
+        """This graph for another problem on the same graph and cliques (a re-schedule's
+        residual problem): only the fixed directions are read anew."""
+        out = copy.copy(self)
+        out.problem = problem
+        out.base = _fixed_orientation(problem)
+        return out
 
     def kernel_args(self) -> tuple[np.ndarray, ...]:
         """The static arrays every kernel takes, as one tuple (unpacked inside the kernel)."""
@@ -313,6 +321,11 @@ class OrientationGraph:
             following=np.zeros(n_conf, dtype=np.bool_),
             counts=np.zeros(self.cliques.budget.size, dtype=np.int64),
         )
+
+
+def _fixed_orientation(problem: Problem) -> np.ndarray:
+    """(M,) int8 orientation of the fixed conflicts (1 a->b, 0 b->a), UNSET elsewhere."""
+    return np.where(problem.forced == 0, UNSET, problem.forced > 0).astype(np.int8)
 
 
 def csr(keys: np.ndarray, values: np.ndarray, n_keys: int) -> tuple[np.ndarray, np.ndarray]:

@@ -20,7 +20,9 @@ import numpy as np
 from service.core.assignment import Assignments
 from service.core.check import CheckResult, check
 from service.core.cliques import Cliques
+from service.core.decode import Decoder
 from service.core.dependency_plan import dependency_plan
+from service.core.orientation import OrientationGraph
 from service.core.problem import ErrorItem, Problem, ProblemError, problem_from_request
 from service.core.progress import previous_from_wire, progress_from_wire, residual_problem
 from service.core.schemas import (
@@ -120,6 +122,8 @@ def solve_problem(
     deadline: float | None = None,
     warm: Assignments | None = None,
     cliques: Cliques | None = None,
+    decoder: Decoder | None = None,
+    orientation: OrientationGraph | None = None,
 ) -> ScheduleResponse:
     """Solve a validated ``problem`` with ``request``'s objective and options.
 
@@ -128,6 +132,8 @@ def solve_problem(
             re-schedule); ignored if the checker rejects it.
         cliques: the problem's cliques if already known (they depend only on the
             conflict graph and densities, so a re-schedule reuses its base problem's).
+        decoder, orientation: likewise, already built for this problem (e.g. by
+            ``for_problem`` from the base problem's).
     """
     opts = request.options
     ctx = SolveContext(
@@ -145,8 +151,8 @@ def solve_problem(
         exact_max_conflicts=policy.exact_max_conflicts,
         first_stage=policy.large_solver,
     )
-    if cliques is not None:
-        ctx.__dict__["cliques"] = cliques  # the cached property, filled in advance
+    prepared = {"cliques": cliques, "decoder": decoder, "orientation": orientation}
+    ctx.__dict__.update({k: v for k, v in prepared.items() if v is not None})  # cached props
     start = time.perf_counter()
     # The cliques first: every solver and the checker need them, and a problem whose
     # cliques exceed the work budget (TooManyCliques) is refused before any solver

@@ -3,9 +3,10 @@
 A fleet (or the disturbance benchmark) re-schedules the same graph every period
 with new progress. The graph-form request is stateless and carries the whole
 problem each time; :class:`Rescheduler` keeps what does not change between
-re-schedules of one graph (the validated problem and its density cliques, which
-depend only on the conflict graph) so that a re-schedule costs the residual
-problem, the solve and the rendering. :func:`service.solvers.dispatch.dispatch`
+re-schedules of one graph (the validated problem, its density cliques and the
+decoder's and move search's clique tables, which depend only on the conflict
+graph), so that a re-schedule costs the residual problem, the solve and the
+rendering. :func:`service.solvers.dispatch.dispatch`
 does the same work for a single request.
 """
 
@@ -15,6 +16,8 @@ import time
 
 from service.core.assignment import Assignments
 from service.core.cliques import Cliques, find_cliques
+from service.core.decode import Decoder
+from service.core.orientation import OrientationGraph
 from service.core.problem import Problem, problem_from_request
 from service.core.progress import previous_from_wire, progress_from_wire, residual_problem
 from service.core.schemas import (
@@ -40,6 +43,8 @@ class Rescheduler:
         self.policy = policy
         self.problem: Problem = problem_from_request(request)
         self.cliques: Cliques = find_cliques(self.problem)
+        self.decoder = Decoder(self.problem, self.cliques)
+        self.orientation = OrientationGraph(self.problem, self.cliques)
         # Only the objective and options are kept of the request: its tens of thousands of
         # models would make every full garbage collection of the process walk them
         # (measured: a 0.5 s pause every ~11 re-schedules at 250 robots).
@@ -68,13 +73,18 @@ class Rescheduler:
         warm = previous
         if isinstance(previous, list):
             warm = previous_from_wire(self.problem, previous)
-        residual = residual_problem(
-            self.problem, progress_from_wire(self.problem, progress), warm
-        )
+        residual = residual_problem(self.problem, progress_from_wire(self.problem, progress), warm)
         options = self.request.options.model_copy(
             update={"solver": solver, "time_limit_s": time_limit_s}
         )
         request = self.request.model_copy(update={"options": options})
         return solve_problem(
-            residual, request, self.policy, deadline=deadline, warm=warm, cliques=self.cliques
+            residual,
+            request,
+            self.policy,
+            deadline=deadline,
+            warm=warm,
+            cliques=self.cliques,
+            decoder=self.decoder.for_problem(residual),
+            orientation=self.orientation.for_problem(residual),
         )
