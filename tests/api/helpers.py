@@ -27,7 +27,7 @@ from service.core.problem import problem_from_request
 from service.core.schemas import ScheduleRequest
 
 TINY = Path(__file__).parents[2] / "schemas" / "examples" / "tiny.json"
-READY_TIMEOUT_S = 60.0
+READY_TIMEOUT_S = 180.0  # warm-up compiles every numba kernel on a fresh clone (no cache)
 # A server process: imports (torch, ortools) and warm-up on a loaded machine.
 START_TIMEOUT_S = 120.0
 
