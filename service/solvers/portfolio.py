@@ -35,6 +35,8 @@ import copy
 import time
 from dataclasses import replace
 
+import numpy as np
+
 from service.core.assignment import Assignments
 from service.core.decompose import DECOMPOSABLE, Part, join, parts
 from service.solvers.exact import BUILD_S_PER_CONFLICT, solve
@@ -95,8 +97,9 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
         left = deadline - time.monotonic()
         exact_fits = (1 - FIRST_STAGE_SHARE) * left > build_s
         found = get_solver(first)(_with_time(ctx, FIRST_STAGE_SHARE * left if exact_fits else left))
-        if found is not None and _cost(ctx, found.assignment) <= cost:
-            best, cost = found, _cost(ctx, found.assignment)
+        found_cost = np.inf if found is None else _cost(ctx, found.assignment)
+        if found is not None and found_cost <= cost:
+            best, cost = found, found_cost
             stages.append(first)
     left = deadline - time.monotonic()
     if left <= build_s:
