@@ -55,6 +55,10 @@ class Settings(BaseSettings):
     # CP-SAT workers per solve, and how many solves run at once in worker threads;
     # their product should not exceed the machine's cores.
     exact_workers: int = Field(default=1, ge=1)
+    # The ``exact`` solver's answer the same on every run with the same seed, even when the
+    # time limit cuts its search: CP-SAT stops on a deterministic-time budget (about half
+    # the time limit on the benchmark machine; docs/contract.md, Exact solver).
+    exact_deterministic: bool = False
     solve_concurrency: int = Field(default=2, ge=1)
     # Solves waiting for a slot beyond the running ones; when full, 503 with Retry-After
     # (retry_after_s, also sent while the service is not ready).

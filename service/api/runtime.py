@@ -163,6 +163,7 @@ def dispatch_policy(settings: Settings) -> DispatchPolicy:
         exact_max_conflicts=settings.exact_max_conflicts,
         large_solver=settings.large_solver,
         exact_workers=settings.exact_workers,
+        exact_deterministic=settings.exact_deterministic,
     )
 
 

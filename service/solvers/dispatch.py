@@ -88,6 +88,7 @@ class DispatchPolicy:
     exact_max_conflicts: int = 60
     large_solver: str = "gnn_vae_refined"
     exact_workers: int = 1
+    exact_deterministic: bool = False
     models: Mapping[str, StoredModel] = field(default_factory=dict)  # loaded GNN-VAEs by objective
 
 
@@ -150,6 +151,7 @@ def solve_problem(
         models=policy.models,
         exact_max_conflicts=policy.exact_max_conflicts,
         first_stage=policy.large_solver,
+        exact_deterministic=policy.exact_deterministic,
     )
     prepared = {"cliques": cliques, "decoder": decoder, "orientation": orientation}
     ctx.__dict__.update({k: v for k, v in prepared.items() if v is not None})  # cached props

@@ -21,16 +21,25 @@ are whole (1 ms data is exact up to 1000 s), but never finer than
 CP-SAT much slower. Where data is finer than that, times are rounded to that
 resolution, so the assignment is optimal up to it; its cost is always
 re-evaluated exactly in floating point by the shared evaluator.
-Determinism: with one worker and no time-limit hit, the answer depends only on
-the problem and the seed; with several workers the optimal *cost* is the same
-but which of several optimal assignments is returned may vary.
+Search (measured on issue 11's conformance sets by ``python -m bench.cpsat``,
+docs/benchmarks.md "CP-SAT configurations"): no LP relaxation but for
+sync_completion (``LINEARIZATION_LEVEL``), and, behind a good hint, an objective
+cutoff at the hint's cost (:meth:`ExactModel.bound_by`).
+
+Determinism (measured the same way): the answer depends only on the problem,
+the hint and the seed when a proof ends the search, or when the search is
+limited in CP-SAT's deterministic time (``deterministic=True``: the time
+limit converted at ``DTIME_PER_S``, one worker, or several interleaved) and
+that limit, not the wall-clock limit, ends it. A search the wall-clock limit
+cuts may return another assignment on the next run; with several workers
+(not interleaved) even a proven optimum may be another of equal cost.
 """
 
 from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,7 +52,16 @@ from service.core.schemas import Objective
 from service.solvers.fcfs import fcfs
 from service.solvers.registry import SolveContext, SolverOutput, register
 
-__all__ = ["ExactModel", "ExactResult", "build_model", "exact", "solve", "top_assignments"]
+__all__ = [
+    "ExactModel",
+    "ExactResult",
+    "Tuning",
+    "build_model",
+    "exact",
+    "search",
+    "solve",
+    "top_assignments",
+]
 
 # Significant digits kept of the largest time when scaling to integers. Measured on
 # the conformance set: CP-SAT time grows ~10x per extra digit (a 4-robot
@@ -51,6 +69,34 @@ __all__ = ["ExactModel", "ExactResult", "build_model", "exact", "solve", "top_as
 TIME_DIGITS = 6
 # avg_delay weights 1/C_r are made integral by lcm(C_r) up to this, else rounded at this scale.
 MAX_DELAY_WEIGHT_SCALE = 10**6
+
+# Further CP-SAT parameters by their ``SatParameters`` field name, e.g. {"linearization_level": 2}.
+Tuning = Mapping[str, bool | int | float]
+
+# CP-SAT's LP relaxation per objective. On the conformance sets (25 problems, 42-262
+# conflicts, one worker, FCFS hint) avg_completion at level 0 reached a mean cost ratio of
+# 0.9927 / 0.9973 at 1 / 3 s and proved 36 / 64 %, at CP-SAT's default level 1 0.9865 /
+# 0.9944 and 28 / 56 %, at level 2 0.9740 / 0.9964 and 24 / 56 % (the LP of the
+# half-reified time constraints is weak); avg_delay 0.9757 against 0.9344 at 1 s (ratio to
+# the better of the two), max_completion proven in both. sync_completion, whose delays are
+# pinned by max-equalities, needs the LP: 0.8636 at level 0 against 0.9984 at level 1.
+LINEARIZATION_LEVEL: dict[str, int] = {
+    "avg_completion": 0,
+    "max_completion": 0,
+    "sync_completion": 1,
+    "avg_delay": 0,
+}
+# The cutoff's solve of the hint's own objective: 0.02-0.07 s at 138-262 conflicts, 0.2 s
+# at 901, 0.6 s at 3,898 and 11 s at 21,835 (one worker, no presolve); above this many
+# conflicts it is skipped, and it gets at most CUTOFF_SHARE of the time left.
+CUTOFF_MAX_CONFLICTS = 1000
+CUTOFF_SHARE = 0.2
+# Deterministic time per second of the time limit in deterministic mode. CP-SAT did
+# 0.17 units per wall second of a one-worker search at linearization level 1, 0.22-0.28 at
+# level 0, on the benchmark machine (2-vCPU AMD EPYC; bench.cpsat, "dtime/s"): this uses
+# a third to a half of the time limit there, and a machine or a load up to about three
+# times slower still ends the search on this limit rather than the wall-clock one.
+DTIME_PER_S = 0.09
 
 
 @dataclass(eq=False)
@@ -61,6 +107,7 @@ class ExactModel:
     a_first: list[cp_model.IntVar]  # (M,)
     following: list[cp_model.IntVar]  # (M,)
     scale: float
+    linearization: int  # the LP relaxation level its objective searches best with
 
     def add_hint(self, assignments: Assignments) -> None:
         """Hint the first assignment of the batch (replacing earlier hints)."""
@@ -69,6 +116,27 @@ class ExactModel:
             self.model.add_hint(lit, val)
         for lit, val in zip(self.following, assignments.following[0].tolist(), strict=True):
             self.model.add_hint(lit, val)
+
+    def bound_by(self, incumbent: Assignments, time_limit_s: float) -> bool:
+        """Require the objective to be at most ``incumbent``'s (a cutoff); True if added.
+
+        The incumbent's integer objective is that of its least delays under its own
+        literals: a solve of a copy of the model with every literal fixed (no presolve,
+        one worker). Not added when that solve does not finish within ``time_limit_s``.
+        """
+        fixed = self.model.clone()
+        values = [*incumbent.a_first[0].tolist(), *incumbent.following[0].tolist()]
+        for lit, val in zip([*self.a_first, *self.following], values, strict=True):
+            fixed.add(fixed.get_bool_var_from_proto_index(lit.index) == int(val))
+        cheap = {"cp_model_presolve": False, "linearization_level": 0}
+        solver = _params(max(time_limit_s, MIN_SEARCH_S), 0, 1, cheap)
+        if solver.solve(fixed) != cp_model.OPTIMAL:
+            return False
+        objective = self.model.proto.objective
+        terms = [self.model.get_int_var_from_proto_index(v) for v in objective.vars]
+        total = cp_model.LinearExpr.weighted_sum(terms, list(objective.coeffs))
+        self.model.add(total <= round(solver.objective_value - objective.offset))
+        return True
 
     def exclude(self, assignments: Assignments) -> None:
         """No-good: forbid exactly the first assignment of the batch."""
@@ -91,10 +159,12 @@ BUILD_S_PER_CONFLICT = 1.2e-4
 
 @dataclass(frozen=True)
 class ExactResult:
-    """A CP-SAT answer: one assignment and whether its optimality was proven."""
+    """A CP-SAT answer: one assignment, whether its optimality was proven, and the work
+    done in CP-SAT's deterministic time units (machine-independent "seconds")."""
 
     assignment: Assignments
     optimal: bool
+    deterministic_time: float
 
 
 def time_scale(problem: Problem) -> float:
@@ -148,7 +218,7 @@ def build_model(problem: Problem, cliques: Cliques, objective: Objective) -> Exa
     # Objective.
     completion = [int(ti[t]) + delay[tp_event[t]] for t in last_tp.tolist()]  # (R,) exprs
     _set_objective(model, problem, objective, completion, delay, horizon + int(ti.max()))
-    return ExactModel(model, a_first, following, scale)
+    return ExactModel(model, a_first, following, scale, LINEARIZATION_LEVEL[objective])
 
 
 def _add_acyclicity(model: cp_model.CpModel, problem: Problem, a_first: list) -> None:
@@ -272,12 +342,16 @@ def _delay_weights(problem: Problem) -> np.ndarray:
     return weights[:-1]
 
 
-def _params(time_limit_s: float, seed: int, workers: int) -> cp_model.CpSolver:
-    """A solver with the request's time limit, seed and worker count."""
+def _params(
+    time_limit_s: float, seed: int, workers: int, tuning: Tuning | None = None
+) -> cp_model.CpSolver:
+    """A solver with the request's time limit, seed and worker count, then ``tuning``."""
     solver = cp_model.CpSolver()
     solver.parameters.max_time_in_seconds = float(time_limit_s)
     solver.parameters.random_seed = int(seed)
     solver.parameters.num_workers = int(workers)
+    for name, value in (tuning or {}).items():
+        setattr(solver.parameters, name, value)
     return solver
 
 
@@ -312,24 +386,68 @@ def solve(
     workers: int = 1,
     hint: Assignments | None = None,
     on_solution: Callable[[float, Assignments], None] | None = None,
+    tuning: Tuning | None = None,
+    cutoff: bool = True,
+    deterministic: bool = False,
 ) -> ExactResult | None:
     """Best assignment CP-SAT finds within the time limit (None if it found none).
 
     The time limit counts from the call: building the model (~120 us per conflict)
     is part of it, and CP-SAT searches for what is left (at least MIN_SEARCH_S).
     ``on_solution`` (optional) sees every improving solution with its wall time,
-    e.g. for measuring how fast CP-SAT reaches a given cost.
+    e.g. for measuring how fast CP-SAT reaches a given cost; ``tuning`` sets further
+    CP-SAT parameters (see :func:`search`).
+
+    Args:
+        cutoff: bound the objective by the hint's cost (up to CUTOFF_MAX_CONFLICTS).
+            Behind the portfolio's first stage it raised the mean cost ratio at 1 s
+            from 0.9911 to 0.9971 (better on 16 of 25 problems, worse on 1); behind
+            FCFS it lowered it from 0.9865 to 0.9840 (4 better, 10 worse): pass False
+            for a poor hint. Not in deterministic mode (its own solve stops on the
+            wall clock).
+        deterministic: also limit the search in deterministic time, ``DTIME_PER_S``
+            per second of ``time_limit_s``, interleaving several workers' search: the
+            answer is then the same on every run with the same seed (25 of 25 problems,
+            one or two workers) unless the wall-clock limit ends the search first.
     """
     deadline = time.monotonic() + time_limit_s
     em = build_model(problem, cliques, objective)
     if hint is not None:
         em.add_hint(hint)
-    solver = _params(max(MIN_SEARCH_S, deadline - time.monotonic()), seed, workers)
+        if cutoff and not deterministic and problem.n_conflicts <= CUTOFF_MAX_CONFLICTS:
+            em.bound_by(hint, CUTOFF_SHARE * (deadline - time.monotonic()))
+    if deterministic:
+        tuning = {
+            **(tuning or {}),
+            "max_deterministic_time": DTIME_PER_S * time_limit_s,
+            "interleave_search": workers > 1,
+        }
+    left = max(MIN_SEARCH_S, deadline - time.monotonic())
+    return search(em, left, seed, workers, on_solution, tuning)
+
+
+def search(
+    em: ExactModel,
+    time_limit_s: float,
+    seed: int = 0,
+    workers: int = 1,
+    on_solution: Callable[[float, Assignments], None] | None = None,
+    tuning: Tuning | None = None,
+) -> ExactResult | None:
+    """Search a built model for ``time_limit_s`` seconds (None if CP-SAT found nothing).
+
+    ``tuning`` sets further CP-SAT parameters by their field name in
+    ``SatParameters``, after the time limit, seed and workers (so it may override
+    them), e.g. ``{"linearization_level": 2}``: what ``bench.cpsat`` compares.
+    """
+    solver = _params(
+        time_limit_s, seed, workers, {"linearization_level": em.linearization, **(tuning or {})}
+    )
     callback = None if on_solution is None else _Incumbents(em, on_solution)
     status = solver.solve(em.model, callback)
     if status not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
         return None
-    return ExactResult(_read(solver, em), status == cp_model.OPTIMAL)
+    return ExactResult(_read(solver, em), status == cp_model.OPTIMAL, solver.deterministic_time)
 
 
 def top_assignments(
@@ -352,12 +470,12 @@ def top_assignments(
     em = build_model(problem, cliques, objective)
     results: list[ExactResult] = []
     while len(results) < count:
-        solver = _params(time_limit_s, seed, workers)
+        solver = _params(time_limit_s, seed, workers, {"linearization_level": em.linearization})
         status = solver.solve(em.model)
         if status not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
             break
         found = _read(solver, em)
-        results.append(ExactResult(found, status == cp_model.OPTIMAL))
+        results.append(ExactResult(found, status == cp_model.OPTIMAL, solver.deterministic_time))
         if status != cp_model.OPTIMAL:
             break
         em.exclude(found)
@@ -367,7 +485,8 @@ def top_assignments(
 
 @register("exact")
 def exact(ctx: SolveContext) -> SolverOutput | None:
-    """CP-SAT within the request's time limit, warm-started from FCFS."""
+    """CP-SAT within the request's time limit, warm-started from FCFS (no cutoff: FCFS is
+    too far from the optimum for one to help), deterministic if the policy says so."""
     result = solve(
         ctx.problem,
         ctx.cliques,
@@ -377,6 +496,8 @@ def exact(ctx: SolveContext) -> SolverOutput | None:
         workers=ctx.workers,
         hint=fcfs(ctx).assignment,
         on_solution=ctx.on_solution,
+        cutoff=False,
+        deterministic=ctx.exact_deterministic,
     )
     if result is None:
         return None

@@ -48,6 +48,9 @@ class SolveContext:
     # first (the policy's large solver), then CP-SAT hinted with its answer.
     exact_max_conflicts: int = 60
     first_stage: str = "gnn_vae_refined"
+    # CP-SAT limited in deterministic time too (exact.solve(deterministic=True)), so that
+    # the ``exact`` solver's answer is the same for the same seed even when it is cut.
+    exact_deterministic: bool = False
 
     @cached_property
     def cliques(self) -> Cliques:

@@ -1,0 +1,432 @@
+"""Time-to-quality of the anytime portfolio and its parts (issue 11, item 6).
+
+``python -m bench.anytime [--quick]`` runs, at every budget of ``--budgets``
+(0.1, 0.3, 1, 3 and 10 s), each method through the service's dispatcher as a
+request with that ``options.time_limit_s`` (:data:`METHODS`):
+
+* ``auto``: the portfolio as shipped (FCFS, then ``gnn_vae_refined`` with 30 %
+  of the budget above the exact threshold, then CP-SAT hinted with the best);
+  also at ``--target-budget`` (5 s, the budget of issue 11's second target);
+* ``auto_tabu``: the same portfolio with its first stage seeded by FCFS and
+  refined by tabu search instead of the GNN-VAE (``large_solver="tabu"``);
+* ``gnn_vae_refined`` and ``tabu`` (from FCFS) alone: each stage alone;
+* ``exact``: plain CP-SAT hinted with FCFS.
+
+Problems: the conformance sets (optima proven by an independent MILP:
+ratios against them) and generated worlds (``--worlds kind:robots ...``,
+``--per-world`` of each: the first seeds whose paths the service accepts; each
+world's graph-form request derived once from its paths and cached under
+``--cache``; ratios against the best cost any method found at any budget,
+or the optimum where a method proved one). A method that proved optimality,
+or stopped on its own before half its budget, is not re-run at larger
+budgets: its answer would be the same (``reused`` in the raw rows). Under
+``--out`` it writes:
+
+* ``tables.md``: per problem family, method and budget the mean cost ratio,
+  mean delay ratio ((ref - free) / (cost - free), free = the cost with no
+  delay) and the share proven optimal; issue 11's targets against ``auto``;
+* ``anytime.png``: delay ratio and cost ratio against the budget, one panel
+  per family, one line per method;
+* ``results.json`` / ``results.csv``: every run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from tqdm import tqdm
+
+from bench.conformance import (
+    LARGE_SETS,
+    Case,
+    case_of,
+    cell,
+    conformance_cases,
+    measured,
+    service_policy,
+    summarize,
+)
+from bench.report import (
+    add_run_args,
+    config_from_args,
+    jsonable,
+    machine_info,
+    nanmean,
+    write_csv,
+    write_json,
+)
+from service.core.path_schemas import PathsRequest
+from service.core.problem import ProblemError
+from service.core.schemas import ScheduleRequest
+from service.geometry.graph import GeometrySettings
+from service.motion.plan import derive
+from service.scenarios import generate
+from service.solvers.dispatch import DispatchPolicy, solve_problem
+
+__all__ = ["METHODS", "QUICK", "Config", "main", "run", "summarize", "world_case"]
+
+MODEL_STORE = Path(__file__).resolve().parents[1] / "model_store"
+# Method name -> (solver, the policy's large solver: the portfolio's first stage).
+METHODS: dict[str, tuple[str, str]] = {
+    "auto": ("auto", "gnn_vae_refined"),
+    "auto_tabu": ("auto", "tabu"),
+    "gnn_vae_refined": ("gnn_vae_refined", "gnn_vae_refined"),
+    "tabu": ("tabu", "gnn_vae_refined"),
+    "exact": ("exact", "gnn_vae_refined"),
+}
+TARGET_METHOD = "auto"  # the one method also run at the target budget
+EARLY = 0.5  # a run ending before this share of its budget stopped on its own
+# A run longer than OVERRUN x its budget + OVERRUN_S is listed as an overrun.
+OVERRUN, OVERRUN_S = 1.1, 0.05
+# Seeds tried per generated world before giving up on refused ones: at 10 m^2 per robot,
+# floor_dense accepted 7 of 30 seeds at 25 robots and none at 50, floor_sparse 2 at 50.
+WORLD_TRIES = 30
+
+
+@dataclass(frozen=True)
+class Config:
+    """What to run; the defaults are the full run documented in docs/benchmarks.md."""
+
+    methods: tuple[str, ...] = tuple(METHODS)
+    budgets: tuple[float, ...] = (0.1, 0.3, 1.0, 3.0, 10.0)
+    target_budget: float | None = 5.0  # run by TARGET_METHOD only (None: not)
+    sets: tuple[str, ...] = (*LARGE_SETS, "geo_10")
+    per_set: int | None = None
+    # Generated worlds as "kind:robots" (service.scenarios.KINDS); dense floors of 50 robots
+    # are floor_sparse: no floor_dense world of 50 robots had paths the service accepts.
+    worlds: tuple[str, ...] = (
+        *(f"{kind}:{n}" for kind in ("wh_two_way", "wh_two_lane") for n in (25, 100, 250)),
+        "floor_dense:25",
+        "floor_sparse:50",
+    )
+    per_world: int = 1
+    objective: str = "avg_completion"
+    base_seed: int = 0
+    store: Path = MODEL_STORE
+    out: Path = Path("docs/results/anytime")
+    cache: Path = Path("bench/cache")
+
+
+QUICK = Config(
+    budgets=(0.1, 0.3),
+    target_budget=None,
+    sets=("wh_25", "geo_10"),
+    per_set=1,
+    worlds=("wh_two_lane:10", "floor_dense:10"),
+    out=Path("bench/out/anytime-quick"),
+)
+
+
+def _derived(kind: str, robots: int, seed: int, objective: str) -> dict[str, Any]:
+    """A world's graph-form request (JSON), or the 422 message when its paths are refused."""
+    world = generate(kind, robots, seed)
+    paths = PathsRequest.model_validate(world.to_request(objective))
+    try:
+        request = derive(paths, GeometrySettings()).to_request(paths)
+    except ProblemError as exc:
+        return {"refused": str(exc)}
+    if request is None:
+        return {"refused": "no two robots interfere"}
+    return {"request": request.model_dump(mode="json", by_alias=True)}
+
+
+def world_case(kind: str, robots: int, index: int, cfg: Config) -> Case | None:
+    """The ``index``-th derivable world of ``kind`` and size (None if WORLD_TRIES seeds fail).
+
+    Derivations (seconds at 250 robots) are cached, one file per world, under ``cfg.cache``.
+    """
+    for seed in range(
+        cfg.base_seed + index * WORLD_TRIES, cfg.base_seed + (index + 1) * WORLD_TRIES
+    ):
+        path = cfg.cache / "anytime" / f"{kind}-{robots}-{seed}-{cfg.objective}.json"
+        if path.exists():
+            data = json.loads(path.read_text())
+        else:
+            data = _derived(kind, robots, seed, cfg.objective)
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text(json.dumps(data))
+        if "request" in data:
+            request = ScheduleRequest.model_validate(data["request"])
+            return case_of(f"{kind} {robots}", f"{kind}/{robots}/{seed}", request)
+    return None
+
+
+def cases_of(cfg: Config) -> list[Case]:
+    """The conformance problems, then every generated world that could be derived."""
+    cases = conformance_cases(cfg.sets, cfg.per_set)
+    worlds = [(*world.split(":"), i) for world in cfg.worlds for i in range(cfg.per_world)]
+    for kind, n, i in tqdm(worlds, desc="worlds", unit="world"):
+        case = world_case(kind, int(n), i, cfg)
+        if case is not None:
+            cases.append(case)
+    return cases
+
+
+def run_method(
+    method: str, case: Case, budget_s: float, cfg: Config, policy: DispatchPolicy
+) -> dict[str, Any]:
+    """One method on one problem through the dispatcher, with ``budget_s`` as time limit
+    (``policy``: the service's, with the method's large solver)."""
+    solver, large = METHODS[method]
+    policy = replace(policy, large_solver=large)
+    options = {"solver": solver, "time_limit_s": budget_s, "seed": cfg.base_seed}
+    request = case.request.model_copy(
+        update={"options": case.request.options.model_copy(update=options)}
+    )
+    start = time.perf_counter()
+    answer = solve_problem(case.problem, request, policy, cliques=case.cliques)
+    runtime = time.perf_counter() - start
+    return {
+        "method": method,
+        "family": case.family,
+        "name": case.name,
+        "conformance": case.ref_cost is not None,
+        "conflicts": case.problem.n_conflicts,
+        "budget_s": budget_s,
+        "cost": answer.cost,
+        "optimal": answer.solver.optimal,
+        "solver_used": answer.solver.name,
+        "detail": answer.solver.detail,
+        "runtime_s": runtime,
+        "free": case.free,
+        "ref_runtime_s": case.ref_runtime_s,
+        "reused": False,
+    }
+
+
+def run_budgets(
+    method: str,
+    case: Case,
+    budgets: Sequence[float],
+    cfg: Config,
+    policy: DispatchPolicy,
+) -> list[dict[str, Any]]:
+    """``method`` at each budget, smallest first; a proven or early-stopped answer stands for the
+    larger budgets (it would be the same)."""
+    rows: list[dict[str, Any]] = []
+    for budget in sorted(budgets):
+        last = rows[-1] if rows else None
+        if last and (last["optimal"] or last["runtime_s"] < EARLY * last["budget_s"]):
+            rows.append({**last, "budget_s": budget, "reused": True})
+        else:
+            rows.append(run_method(method, case, budget, cfg, policy))
+    return rows
+
+
+def budgets_of(method: str, cfg: Config) -> tuple[float, ...]:
+    """The budgets ``method`` runs at: every one, and the target budget for TARGET_METHOD."""
+    extra = (cfg.target_budget,) if method == TARGET_METHOD and cfg.target_budget else ()
+    return tuple(sorted({*cfg.budgets, *extra}))
+
+
+def warm_up(cfg: Config, case: Case, policy: DispatchPolicy) -> None:
+    """Every method once, briefly: JIT compiling and model loading are not timed."""
+    for method in cfg.methods:
+        run_method(method, case, 0.3, cfg, policy)
+
+
+def run(cfg: Config, progress: bool = True) -> dict[str, Any]:
+    """Every method at every budget on every problem; return everything that gets written."""
+    cases = cases_of(cfg)
+    policy = service_policy(cfg.store)
+    warm_up(cfg, min(cases, key=lambda c: c.problem.n_conflicts), policy)
+    rows: list[dict[str, Any]] = []
+    for case in tqdm(cases, desc="anytime", unit="problem", disable=not progress):
+        found = [
+            r for m in cfg.methods for r in run_budgets(m, case, budgets_of(m, cfg), cfg, policy)
+        ]
+        rows += measured(case, found)
+    return {"machine": machine_info(), "config": jsonable(asdict(cfg)), "rows": rows}
+
+
+def curve_table(summary: Sequence[dict[str, Any]]) -> str:
+    """Markdown: per family and method, one cell per budget."""
+    budgets = sorted({s["budget_s"] for s in summary})
+    by = {(s["family"], s["method"], s["budget_s"]): s for s in summary}
+    headers = ["family", "n", "method", *(f"{b:g} s" for b in budgets)]
+    lines = ["| " + " | ".join(headers) + " |", "|" + "---|" * len(headers)]
+    for family, method in dict.fromkeys((s["family"], s["method"]) for s in summary):
+        n = by[(family, method, min(b for f, m, b in by if (f, m) == (family, method)))]
+        cells = [family, str(n["problems"]), f"`{method}`"]
+        cells += [cell(by.get((family, method, b))) for b in budgets]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+# Issue 11's targets for ``auto``: (budget s, mean cost ratio, mean delay ratio) per group.
+TARGETS = ((1.0, 0.99, 0.9), (5.0, 0.999, 0.98))
+
+
+def target_group(family: str) -> str | None:
+    """The target group of a family: warehouses, dense geometric floors, or none."""
+    if family.startswith("wh"):
+        return "warehouse"
+    if family.startswith(("geo_dense", "floor_dense")):
+        return "dense geometric"
+    return None
+
+
+def target_table(rows: Sequence[dict[str, Any]]) -> str:
+    """Markdown: ``auto`` against issue 11's targets per group, on the conformance sets
+    (proven optima), on the generated worlds (best found) and on both."""
+    auto = [r for r in rows if r["method"] == TARGET_METHOD and target_group(r["family"])]
+    lines = [
+        "| budget | group | problems | n | cost ratio (target) | delay ratio (target) | verdict |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    sources = (("conformance", True), ("generated", False), ("both", None))
+    for budget, ratio_goal, delay_goal in TARGETS:
+        for group in ("warehouse", "dense geometric"):
+            for source, conformance in sources:
+                members = [
+                    r
+                    for r in auto
+                    if r["budget_s"] == budget
+                    and target_group(r["family"]) == group
+                    and conformance in (None, r["conformance"])
+                ]
+                if not members:
+                    continue
+                ratio = float(np.mean([m["ratio"] for m in members]))
+                delay = nanmean([m["delay_ratio"] for m in members])
+                met = ratio >= ratio_goal and delay >= delay_goal
+                lines.append(
+                    f"| {budget:g} s | {group} | {source} | {len(members)} | {ratio:.4f} "
+                    f"(>= {ratio_goal}) | {delay:.3f} (>= {delay_goal}) | "
+                    f"{'met' if met else 'missed'} |"
+                )
+    if len(lines) == 2:
+        return "(no run of `auto` at a target budget)"
+    milp = [r for r in auto if r["ref_runtime_s"] is not None and r["ref_runtime_s"] <= 5.0]
+    proven = [r for r in milp if r["budget_s"] == 5.0]
+    if proven:
+        lines.append(
+            f"\nProven optimal at 5 s where the independent MILP proves within 5 s: "
+            f"{sum(r['optimal'] for r in proven)} of {len(proven)} "
+            f"({', '.join(r['name'] for r in proven if not r['optimal']) or 'all'} unproven)."
+        )
+    return "\n".join(lines)
+
+
+def overrun_table(rows: Sequence[dict[str, Any]]) -> str:
+    """Markdown: the longest run per method, family and budget, where it overran the budget."""
+    worst: dict[tuple, dict[str, Any]] = {}
+    for r in rows:
+        key = (r["method"], r["family"], r["budget_s"])
+        if r["runtime_s"] > OVERRUN * r["budget_s"] + OVERRUN_S and (
+            key not in worst or r["runtime_s"] > worst[key]["runtime_s"]
+        ):
+            worst[key] = r
+    if not worst:
+        return "(none)"
+    lines = ["| method | family | budget | longest run | its solver |", "|---|---|---|---|---|"]
+    for (method, family, budget), r in worst.items():
+        cells = [
+            f"`{method}`",
+            family,
+            f"{budget:g} s",
+            f"{r['runtime_s']:.2f} s",
+            r["solver_used"],
+        ]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def plot(summary: Sequence[dict[str, Any]], key: str, label: str, path: Path) -> None:
+    """``key`` against the budget: one panel per family, one line per method (log budget axis)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    families = list(dict.fromkeys(s["family"] for s in summary))
+    cols = min(5, len(families))
+    nrows = -(-len(families) // cols)
+    fig, axes = plt.subplots(
+        nrows, cols, figsize=(3.6 * cols, 3.2 * nrows), squeeze=False, sharex=True
+    )
+    for ax, family in zip(axes.ravel(), families, strict=False):
+        for method in dict.fromkeys(s["method"] for s in summary):
+            sel = sorted(
+                (s for s in summary if s["family"] == family and s["method"] == method),
+                key=lambda s: s["budget_s"],
+            )
+            ax.plot([s["budget_s"] for s in sel], [s[key] for s in sel], "o-", ms=3, label=method)
+        n = next(s["problems"] for s in summary if s["family"] == family)
+        ax.set_title(f"{family} (n = {n})", fontsize="medium")
+        ax.set_xscale("log")
+        ax.grid(True, which="both", alpha=0.3)
+    for ax in axes.ravel()[len(families) :]:
+        ax.set_visible(False)
+    for ax in axes[-1]:
+        ax.set_xlabel("budget (s)")
+    for ax in axes[:, 0]:
+        ax.set_ylabel(label)
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=len(labels), frameon=False)
+    fig.tight_layout(rect=(0, 0.06 / nrows, 1, 1))
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def report(results: dict[str, Any], out: Path) -> str:
+    """Write tables, plots and raw files under ``out``; return the tables' text."""
+    out.mkdir(parents=True, exist_ok=True)
+    rows, m = results["rows"], results["machine"]
+    summary = summarize(rows, ("family", "method", "budget_s"))
+    problems = len({r["name"] for r in rows})
+    text = "\n\n".join(
+        [
+            f"Run {m['date']} on {m['cpu']} ({m['cpus']} CPUs), commit {m['commit']}; "
+            f"{problems} problems, seed {results['config']['base_seed']}. Conformance sets: "
+            "ratios against the proven optimum; generated worlds (`kind robots`): against the "
+            "best cost any method found at any budget.",
+            "Cells: mean cost ratio / mean delay ratio / share proven optimal.",
+            curve_table(summary),
+            "`auto` against issue 11's targets:",
+            target_table(rows),
+            f"Runs over their budget by more than {100 * (OVERRUN - 1):.0f} % "
+            f"+ {OVERRUN_S * 1000:.0f} ms (worst per method, family and budget):",
+            overrun_table(rows),
+        ]
+    )
+    (out / "tables.md").write_text(text + "\n")
+    write_json(out / "results.json", results)
+    write_csv(out / "results.csv", rows)
+    plot(summary, "delay_ratio_mean", "mean delay ratio", out / "anytime.png")
+    plot(summary, "ratio_mean", "mean cost ratio", out / "anytime-cost.png")
+    return text
+
+
+def _parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--quick", action="store_true", help="a CI smoke run of about a minute")
+    p.add_argument("--methods", nargs="+", choices=tuple(METHODS))
+    p.add_argument("--budgets", type=float, nargs="+", help="seconds per solve")
+    p.add_argument("--target-budget", type=float, help=f"also run {TARGET_METHOD} at this budget")
+    p.add_argument("--sets", nargs="*", help="conformance sets (tests/data/conformance)")
+    p.add_argument("--per-set", type=int, help="problems per set (default: all)")
+    p.add_argument("--worlds", nargs="*", help="generated worlds as kind:robots")
+    p.add_argument("--per-world", type=int, help="worlds of each kind and size")
+    add_run_args(p)
+    return p.parse_args(argv)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """CLI entry."""
+    args = _parse_args(argv)
+    cfg = config_from_args(args, Config(), QUICK)
+    results = json.loads((cfg.out / "results.json").read_text()) if args.summarize else run(cfg)
+    print(report(results, cfg.out))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,172 @@
+"""Benchmark cases with a yardstick: the shipped conformance sets and their proven optima.
+
+``tests/data/conformance/<set>.jsonl`` holds problems whose optimum an
+independent MILP proved (``ref_cost``), with the time it needed
+(``ref_runtime_s``). :class:`Case` carries one problem, validated once, with
+its cliques and its cost at zero delay (``free``, the bound of the delay
+ratio); generated problems without a proven optimum leave ``ref_cost`` unset.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bench.report import delay_ratio, fmt, nanmean
+from service.core.cliques import Cliques, find_cliques
+from service.core.evaluate import Evaluator
+from service.core.problem import Problem, problem_from_request
+from service.core.schemas import Objective, ScheduleRequest
+from service.settings import Settings
+from service.solvers.dispatch import DispatchPolicy
+
+__all__ = [
+    "CONFORMANCE",
+    "LARGE_SETS",
+    "Case",
+    "case_of",
+    "cell",
+    "conformance_cases",
+    "measured",
+    "service_policy",
+    "summarize",
+]
+
+CONFORMANCE = Path(__file__).resolve().parents[1] / "tests" / "data" / "conformance"
+# The sets of issue 11's targets: warehouses of 25-100 robots and dense geometric floors.
+LARGE_SETS = ("wh_25", "wh_50", "wh_100", "geo_dense_25")
+REL_TOL = 1e-9  # a cost within this relative distance of the reference counts as reaching it
+
+
+@dataclass(frozen=True, eq=False)
+class Case:
+    """One problem under its request's objective, ready to solve, with its yardstick."""
+
+    family: str  # the conformance set, or the generated kind and size
+    name: str
+    request: ScheduleRequest
+    problem: Problem
+    cliques: Cliques
+    free: float  # the objective's value with every delay zero
+    ref_cost: float | None = None  # proven optimum; None: measure against the best found
+    ref_runtime_s: float | None = None  # the independent MILP's time to prove ref_cost
+
+    @property
+    def objective(self) -> Objective:
+        return self.request.objective
+
+
+def case_of(
+    family: str,
+    name: str,
+    request: ScheduleRequest,
+    ref_cost: float | None = None,
+    ref_runtime_s: float | None = None,
+) -> Case:
+    """Validate ``request`` the way the service does and build what every solve reuses."""
+    problem = problem_from_request(request)
+    free = Evaluator(problem).free_costs()[request.objective]
+    return Case(
+        family, name, request, problem, find_cliques(problem), free, ref_cost, ref_runtime_s
+    )
+
+
+def conformance_cases(
+    sets: Sequence[str], per_set: int | None = None, objective: Objective | None = None
+) -> list[Case]:
+    """The first ``per_set`` problems (all: None) of each named conformance set, in order.
+
+    ``objective`` replaces each request's own; the proven optimum then no longer
+    applies (``ref_cost`` None: measure against the best found).
+    """
+    cases = []
+    for name in sets:
+        lines = (CONFORMANCE / f"{name}.jsonl").read_text().splitlines()[:per_set]
+        for line in lines:
+            rec = json.loads(line)
+            request = ScheduleRequest.model_validate(rec["request"])
+            if objective is None or objective == request.objective:
+                cases.append(
+                    case_of(name, rec["name"], request, rec["ref_cost"], rec["ref_runtime_s"])
+                )
+            else:
+                request = request.model_copy(update={"objective": objective})
+                cases.append(case_of(name, rec["name"], request))
+    return cases
+
+
+def measured(case: Case, rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Every row (each with its ``cost`` and ``optimal``) of one problem, measured against
+    its reference: the proven optimum of a conformance problem, else the best cost among
+    the rows (``ref_proven`` when a row proved that cost optimal)."""
+    best = min(r["cost"] for r in rows)
+    ref = case.ref_cost if case.ref_cost is not None else best
+    proven = case.ref_cost is not None or any(r["optimal"] and r["cost"] == best for r in rows)
+    return [
+        {
+            **r,
+            "ref_cost": ref,
+            "ref_proven": proven,
+            "ratio": ref / r["cost"] if r["cost"] > 0 else 1.0,
+            "delay_ratio": delay_ratio(ref, r["cost"], case.free),
+            "reached": r["cost"] <= ref * (1 + REL_TOL),
+        }
+        for r in rows
+    ]
+
+
+def service_policy(store: Path) -> DispatchPolicy:
+    """The service's dispatch policy with the models of ``store`` loaded, and torch's threads
+    set as the service sets them (cores / SCHEDULER_SOLVE_CONCURRENCY: 1 on 2 cores).
+
+    Torch's own default (every core) next to another busy process made GNN-VAE sampling
+    overrun 0.1 s budgets by 1-1.7 s on the 2-core benchmark machine; with one thread, 0.
+
+    Raises:
+        SystemExit: a model failed to load.
+    """
+    from service.api.runtime import build_runtime, load_models
+
+    runtime = build_runtime(Settings(model_store=store))
+    load_models(runtime, store)
+    if runtime.model_errors:
+        raise SystemExit(f"models failed to load: {runtime.model_errors}")
+    return runtime.policy
+
+
+def summarize(
+    rows: Sequence[dict[str, Any]],
+    by: Sequence[str],
+    extra: Callable[[list[dict[str, Any]]], dict[str, Any]] | None = None,
+) -> list[dict[str, Any]]:
+    """Per group of ``by`` keys, in first-seen order: the mean cost and delay ratios, the
+    shares proven optimal and reaching the reference, the mean runtime, and ``extra``'s
+    figures of the group's rows."""
+    groups: dict[tuple, list[dict[str, Any]]] = {}
+    for r in rows:
+        groups.setdefault(tuple(r[k] for k in by), []).append(r)
+    return [
+        {
+            **dict(zip(by, key, strict=True)),
+            "problems": len(members),
+            "ratio_mean": float(np.mean([m["ratio"] for m in members])),
+            "delay_ratio_mean": nanmean([m["delay_ratio"] for m in members]),
+            "proven": float(np.mean([m["optimal"] for m in members])),
+            "reached": float(np.mean([m["reached"] for m in members])),
+            "runtime_s_mean": float(np.mean([m["runtime_s"] for m in members])),
+            **(extra(members) if extra else {}),
+        }
+        for key, members in groups.items()
+    ]
+
+
+def cell(s: dict[str, Any] | None) -> str:
+    """``cost ratio / delay ratio / proven %`` of one summary row ("-": not run)."""
+    if s is None:
+        return "-"
+    return f"{fmt(s['ratio_mean'], 4)} / {fmt(s['delay_ratio_mean'])} / {100 * s['proven']:.0f} %"

@@ -1,0 +1,106 @@
+"""bench.anytime: references, re-use of proven answers, targets, flags, and the quick run."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+
+import bench.anytime as anytime
+from bench.anytime import (
+    QUICK,
+    Config,
+    _parse_args,
+    budgets_of,
+    main,
+    run_budgets,
+    target_group,
+    target_table,
+    world_case,
+)
+from bench.conformance import conformance_cases, measured
+from bench.report import config_from_args
+
+
+def _raw(method: str, cost: float, budget: float = 1.0, optimal: bool = False) -> dict:
+    return {"method": method, "cost": cost, "budget_s": budget, "optimal": optimal,
+            "runtime_s": budget, "reused": False}  # fmt: skip
+
+
+def test_generated_worlds_measure_against_the_best_found_conformance_against_the_optimum() -> None:
+    (case,) = conformance_cases(("wh_25",), per_set=1)
+    rows = measured(case, [_raw("tabu", case.ref_cost * 1.1)])
+    assert rows[0]["ref_cost"] == case.ref_cost and rows[0]["ref_proven"]
+    assert rows[0]["ratio"] == pytest.approx(1 / 1.1)
+    (other,) = conformance_cases(("wh_25",), per_set=1, objective="max_completion")
+    assert other.objective == "max_completion" and other.ref_cost is None
+    generated = replace(case, ref_cost=None, ref_runtime_s=None)
+    rows = measured(generated, [_raw("tabu", 12.0), _raw("exact", 10.0, optimal=True)])
+    assert [r["ref_cost"] for r in rows] == [10.0, 10.0]
+    assert rows[0]["ref_proven"] and rows[1]["reached"] and not rows[0]["reached"]
+
+
+def test_proven_or_early_answers_stand_for_larger_budgets(monkeypatch) -> None:
+    calls = []
+
+    def fake(method, case, budget, cfg, policy):
+        calls.append(budget)
+        runtime = 0.05 if budget >= 3 else budget  # stops on its own from 3 s on
+        return {**_raw(method, 10.0 / budget, budget, optimal=False), "runtime_s": runtime}
+
+    monkeypatch.setattr(anytime, "run_method", fake)
+    rows = run_budgets("tabu", None, (10.0, 0.1, 1.0, 3.0), Config(), None)
+    assert calls == [0.1, 1.0, 3.0]
+    assert [r["budget_s"] for r in rows] == [0.1, 1.0, 3.0, 10.0]
+    assert rows[-1]["reused"] and rows[-1]["cost"] == rows[-2]["cost"]
+    assert budgets_of("auto", Config()) == (0.1, 0.3, 1.0, 3.0, 5.0, 10.0)
+    assert budgets_of("tabu", Config()) == Config().budgets
+
+
+def test_targets_group_warehouses_and_dense_floors() -> None:
+    assert target_group("wh_25") == target_group("wh_two_way 250") == "warehouse"
+    assert target_group("geo_dense_25") == target_group("floor_dense 50") == "dense geometric"
+    assert target_group("geo_10") is None
+    row = {"method": "auto", "family": "wh_25", "ratio": 0.995, "delay_ratio": 0.95,
+           "optimal": False, "name": "wh_25/0", "ref_runtime_s": 1.0,
+           "conformance": True}  # fmt: skip
+    text = target_table([{**row, "budget_s": 1.0}, {**row, "budget_s": 5.0}])
+    assert "| 1 s | warehouse | conformance | 1 | 0.9950 (>= 0.99) | 0.950 (>= 0.9) | met |" in text
+    assert "| 5 s | warehouse | both | 1 | 0.9950 (>= 0.999) | 0.950 (>= 0.98) | missed |" in text
+    assert "generated" not in text
+    assert "0 of 1 (wh_25/0 unproven)" in text
+
+
+def test_quick_defaults_and_flags() -> None:
+    assert config_from_args(_parse_args(["--quick"]), Config(), QUICK) == QUICK
+    cfg = config_from_args(
+        _parse_args(["--methods", "auto", "--budgets", "1", "--worlds", "wh_mixed:50"]),
+        Config(),
+        QUICK,
+    )
+    assert cfg == replace(Config(), methods=("auto",), budgets=(1.0,), worlds=("wh_mixed:50",))
+
+
+def test_worlds_are_derived_once_and_cached(tmp_path: Path) -> None:
+    cfg = replace(QUICK, cache=tmp_path)
+    case = world_case("wh_two_lane", 10, 0, cfg)
+    assert case is not None and case.ref_cost is None and case.problem.n_conflicts > 0
+    (cached,) = (tmp_path / "anytime").iterdir()
+    again = world_case("wh_two_lane", 10, 0, cfg)
+    assert again is not None and again.request == case.request
+    assert json.loads(cached.read_text())["request"]["objective"] == "avg_completion"
+
+
+def test_quick_run_writes_everything(tmp_path: Path) -> None:
+    out, cache = tmp_path / "out", tmp_path / "cache"
+    assert main(["--quick", "--out", str(out), "--cache", str(cache)]) == 0
+    for name in ("tables.md", "results.json", "results.csv", "anytime.png", "anytime-cost.png"):
+        assert (out / name).stat().st_size > 0
+    rows = json.loads((out / "results.json").read_text())["rows"]
+    assert {r["method"] for r in rows} == set(QUICK.methods)
+    assert {r["budget_s"] for r in rows} == set(QUICK.budgets)
+    assert all(r["ratio"] <= 1 + 1e-9 for r in rows)
+    assert any(not r["conformance"] for r in rows) and any(r["conformance"] for r in rows)
+    assert main(["--quick", "--out", str(out), "--summarize"]) == 0  # re-renders from raw
