@@ -33,7 +33,6 @@ budgets: its answer would be the same (``reused`` in the raw rows). Under
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, replace
@@ -43,15 +42,17 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from bench.conformance import (
+from bench.cases import (
     LARGE_SETS,
     Case,
-    case_of,
+    add_case_args,
     cell,
     conformance_cases,
     measured,
+    run_cli,
     service_policy,
     summarize,
+    world_cases,
 )
 from bench.report import (
     add_run_args,
@@ -62,15 +63,9 @@ from bench.report import (
     write_csv,
     write_json,
 )
-from service.core.path_schemas import PathsRequest
-from service.core.problem import ProblemError
-from service.core.schemas import ScheduleRequest
-from service.geometry.graph import GeometrySettings
-from service.motion.plan import derive
-from service.scenarios import generate
 from service.solvers.dispatch import DispatchPolicy, solve_problem
 
-__all__ = ["METHODS", "QUICK", "Config", "main", "run", "summarize", "world_case"]
+__all__ = ["METHODS", "QUICK", "Config", "main", "run"]
 
 MODEL_STORE = Path(__file__).resolve().parents[1] / "model_store"
 # Method name -> (solver, the policy's large solver: the portfolio's first stage).
@@ -85,9 +80,6 @@ TARGET_METHOD = "auto"  # the one method also run at the target budget
 EARLY = 0.5  # a run ending before this share of its budget stopped on its own
 # A run longer than OVERRUN x its budget + OVERRUN_S is listed as an overrun.
 OVERRUN, OVERRUN_S = 1.1, 0.05
-# Seeds tried per generated world before giving up on refused ones: at 10 m^2 per robot,
-# floor_dense accepted 7 of 30 seeds at 25 robots and none at 50, floor_sparse 2 at 50.
-WORLD_TRIES = 30
 
 
 @dataclass(frozen=True)
@@ -124,49 +116,11 @@ QUICK = Config(
 )
 
 
-def _derived(kind: str, robots: int, seed: int, objective: str) -> dict[str, Any]:
-    """A world's graph-form request (JSON), or the 422 message when its paths are refused."""
-    world = generate(kind, robots, seed)
-    paths = PathsRequest.model_validate(world.to_request(objective))
-    try:
-        request = derive(paths, GeometrySettings()).to_request(paths)
-    except ProblemError as exc:
-        return {"refused": str(exc)}
-    if request is None:
-        return {"refused": "no two robots interfere"}
-    return {"request": request.model_dump(mode="json", by_alias=True)}
-
-
-def world_case(kind: str, robots: int, index: int, cfg: Config) -> Case | None:
-    """The ``index``-th derivable world of ``kind`` and size (None if WORLD_TRIES seeds fail).
-
-    Derivations (seconds at 250 robots) are cached, one file per world, under ``cfg.cache``.
-    """
-    for seed in range(
-        cfg.base_seed + index * WORLD_TRIES, cfg.base_seed + (index + 1) * WORLD_TRIES
-    ):
-        path = cfg.cache / "anytime" / f"{kind}-{robots}-{seed}-{cfg.objective}.json"
-        if path.exists():
-            data = json.loads(path.read_text())
-        else:
-            data = _derived(kind, robots, seed, cfg.objective)
-            path.parent.mkdir(parents=True, exist_ok=True)
-            path.write_text(json.dumps(data))
-        if "request" in data:
-            request = ScheduleRequest.model_validate(data["request"])
-            return case_of(f"{kind} {robots}", f"{kind}/{robots}/{seed}", request)
-    return None
-
-
 def cases_of(cfg: Config) -> list[Case]:
     """The conformance problems, then every generated world that could be derived."""
-    cases = conformance_cases(cfg.sets, cfg.per_set)
-    worlds = [(*world.split(":"), i) for world in cfg.worlds for i in range(cfg.per_world)]
-    for kind, n, i in tqdm(worlds, desc="worlds", unit="world"):
-        case = world_case(kind, int(n), i, cfg)
-        if case is not None:
-            cases.append(case)
-    return cases
+    return conformance_cases(cfg.sets, cfg.per_set) + world_cases(
+        cfg.worlds, cfg.per_world, cfg.cache, cfg.base_seed, cfg.objective
+    )
 
 
 def run_method(
@@ -411,9 +365,7 @@ def _parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     p.add_argument("--methods", nargs="+", choices=tuple(METHODS))
     p.add_argument("--budgets", type=float, nargs="+", help="seconds per solve")
     p.add_argument("--target-budget", type=float, help=f"also run {TARGET_METHOD} at this budget")
-    p.add_argument("--sets", nargs="*", help="conformance sets (tests/data/conformance)")
-    p.add_argument("--per-set", type=int, help="problems per set (default: all)")
-    p.add_argument("--worlds", nargs="*", help="generated worlds as kind:robots")
+    add_case_args(p)
     p.add_argument("--per-world", type=int, help="worlds of each kind and size")
     add_run_args(p)
     return p.parse_args(argv)
@@ -423,9 +375,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """CLI entry."""
     args = _parse_args(argv)
     cfg = config_from_args(args, Config(), QUICK)
-    results = json.loads((cfg.out / "results.json").read_text()) if args.summarize else run(cfg)
-    print(report(results, cfg.out))
-    return 0
+    return run_cli(args.summarize, cfg.out, lambda: run(cfg), report)
 
 
 if __name__ == "__main__":

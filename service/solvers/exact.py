@@ -23,8 +23,8 @@ resolution, so the assignment is optimal up to it; its cost is always
 re-evaluated exactly in floating point by the shared evaluator.
 Search (measured on issue 11's conformance sets by ``python -m bench.cpsat``,
 docs/benchmarks.md "CP-SAT configurations"): no LP relaxation but for
-sync_completion (``LINEARIZATION_LEVEL``), and, behind a good hint, an objective
-cutoff at the hint's cost (:meth:`ExactModel.bound_by`).
+sync_completion (``LINEARIZATION_LEVEL``), one worker unless the policy says
+otherwise, hinted by the caller.
 
 Determinism (measured the same way): the answer depends only on the problem,
 the hint and the seed when a proof ends the search, or when the search is
@@ -86,11 +86,6 @@ LINEARIZATION_LEVEL: dict[str, int] = {
     "sync_completion": 1,
     "avg_delay": 0,
 }
-# The cutoff's solve of the hint's own objective: 0.02-0.07 s at 138-262 conflicts, 0.2 s
-# at 901, 0.6 s at 3,898 and 11 s at 21,835 (one worker, no presolve); above this many
-# conflicts it is skipped, and it gets at most CUTOFF_SHARE of the time left.
-CUTOFF_MAX_CONFLICTS = 1000
-CUTOFF_SHARE = 0.2
 # Deterministic time per second of the time limit in deterministic mode. CP-SAT did
 # 0.17 units per wall second of a one-worker search at linearization level 1, 0.22-0.28 at
 # level 0, on the benchmark machine (2-vCPU AMD EPYC; bench.cpsat, "dtime/s"): this uses
@@ -116,27 +111,6 @@ class ExactModel:
             self.model.add_hint(lit, val)
         for lit, val in zip(self.following, assignments.following[0].tolist(), strict=True):
             self.model.add_hint(lit, val)
-
-    def bound_by(self, incumbent: Assignments, time_limit_s: float) -> bool:
-        """Require the objective to be at most ``incumbent``'s (a cutoff); True if added.
-
-        The incumbent's integer objective is that of its least delays under its own
-        literals: a solve of a copy of the model with every literal fixed (no presolve,
-        one worker). Not added when that solve does not finish within ``time_limit_s``.
-        """
-        fixed = self.model.clone()
-        values = [*incumbent.a_first[0].tolist(), *incumbent.following[0].tolist()]
-        for lit, val in zip([*self.a_first, *self.following], values, strict=True):
-            fixed.add(fixed.get_bool_var_from_proto_index(lit.index) == int(val))
-        cheap = {"cp_model_presolve": False, "linearization_level": 0}
-        solver = _params(max(time_limit_s, MIN_SEARCH_S), 0, 1, cheap)
-        if solver.solve(fixed) != cp_model.OPTIMAL:
-            return False
-        objective = self.model.proto.objective
-        terms = [self.model.get_int_var_from_proto_index(v) for v in objective.vars]
-        total = cp_model.LinearExpr.weighted_sum(terms, list(objective.coeffs))
-        self.model.add(total <= round(solver.objective_value - objective.offset))
-        return True
 
     def exclude(self, assignments: Assignments) -> None:
         """No-good: forbid exactly the first assignment of the batch."""
@@ -387,7 +361,6 @@ def solve(
     hint: Assignments | None = None,
     on_solution: Callable[[float, Assignments], None] | None = None,
     tuning: Tuning | None = None,
-    cutoff: bool = True,
     deterministic: bool = False,
 ) -> ExactResult | None:
     """Best assignment CP-SAT finds within the time limit (None if it found none).
@@ -399,12 +372,6 @@ def solve(
     CP-SAT parameters (see :func:`search`).
 
     Args:
-        cutoff: bound the objective by the hint's cost (up to CUTOFF_MAX_CONFLICTS).
-            Behind the portfolio's first stage it raised the mean cost ratio at 1 s
-            from 0.9911 to 0.9971 (better on 16 of 25 problems, worse on 1); behind
-            FCFS it lowered it from 0.9865 to 0.9840 (4 better, 10 worse): pass False
-            for a poor hint. Not in deterministic mode (its own solve stops on the
-            wall clock).
         deterministic: also limit the search in deterministic time, ``DTIME_PER_S``
             per second of ``time_limit_s``, interleaving several workers' search: the
             answer is then the same on every run with the same seed (25 of 25 problems,
@@ -414,8 +381,6 @@ def solve(
     em = build_model(problem, cliques, objective)
     if hint is not None:
         em.add_hint(hint)
-        if cutoff and not deterministic and problem.n_conflicts <= CUTOFF_MAX_CONFLICTS:
-            em.bound_by(hint, CUTOFF_SHARE * (deadline - time.monotonic()))
     if deterministic:
         tuning = {
             **(tuning or {}),
@@ -485,8 +450,8 @@ def top_assignments(
 
 @register("exact")
 def exact(ctx: SolveContext) -> SolverOutput | None:
-    """CP-SAT within the request's time limit, warm-started from FCFS (no cutoff: FCFS is
-    too far from the optimum for one to help), deterministic if the policy says so."""
+    """CP-SAT within the request's time limit, warm-started from FCFS, deterministic if the
+    policy says so."""
     result = solve(
         ctx.problem,
         ctx.cliques,
@@ -496,7 +461,6 @@ def exact(ctx: SolveContext) -> SolverOutput | None:
         workers=ctx.workers,
         hint=fcfs(ctx).assignment,
         on_solution=ctx.on_solution,
-        cutoff=False,
         deterministic=ctx.exact_deterministic,
     )
     if result is None:

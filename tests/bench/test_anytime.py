@@ -18,9 +18,8 @@ from bench.anytime import (
     run_budgets,
     target_group,
     target_table,
-    world_case,
 )
-from bench.conformance import conformance_cases, measured
+from bench.cases import conformance_cases, measured, world_case
 from bench.report import config_from_args
 
 
@@ -84,11 +83,10 @@ def test_quick_defaults_and_flags() -> None:
 
 
 def test_worlds_are_derived_once_and_cached(tmp_path: Path) -> None:
-    cfg = replace(QUICK, cache=tmp_path)
-    case = world_case("wh_two_lane", 10, 0, cfg)
+    case = world_case("wh_two_lane", 10, 0, tmp_path)
     assert case is not None and case.ref_cost is None and case.problem.n_conflicts > 0
-    (cached,) = (tmp_path / "anytime").iterdir()
-    again = world_case("wh_two_lane", 10, 0, cfg)
+    (cached,) = (tmp_path / "worlds").iterdir()
+    again = world_case("wh_two_lane", 10, 0, tmp_path)
     assert again is not None and again.request == case.request
     assert json.loads(cached.read_text())["request"]["objective"] == "avg_completion"
 

@@ -1,4 +1,4 @@
-"""bench.cpsat: summaries, flags, explicit variants, and the quick run end to end."""
+"""bench.cpsat: the objective cutoff, summaries, flags, explicit variants, the quick run."""
 
 from __future__ import annotations
 
@@ -6,10 +6,37 @@ import json
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import pytest
 
-from bench.cpsat import QUICK, VARIANTS, Config, _parse_args, main, summarize
+from bench.cases import conformance_cases
+from bench.cpsat import QUICK, VARIANTS, Config, _parse_args, bound_by, main, summarize
 from bench.report import config_from_args
+from service.solvers.exact import build_model, search
+from service.solvers.fcfs import fcfs
+from service.solvers.registry import SolveContext
+
+
+def test_the_cutoff_is_the_incumbents_cost_exactly() -> None:
+    (case,) = conformance_cases(("wh_50",), per_set=1)
+    ctx = SolveContext(case.problem, case.objective, 5.0)
+    incumbent = fcfs(ctx).assignment
+    em = build_model(case.problem, case.cliques, case.objective)
+    assert bound_by(em, incumbent, 5.0)
+    found = search(em, 1.0)  # nothing worse than the incumbent
+    assert found is not None
+    cost, bound = (
+        float(ctx.evaluator.evaluate(a).costs[case.objective][0])
+        for a in (found.assignment, incumbent)
+    )
+    assert cost <= bound + 1e-9
+    # Tight, not below: the incumbent itself stays feasible.
+    values = [*incumbent.a_first[0].tolist(), *incumbent.following[0].tolist()]
+    for lit, val in zip([*em.a_first, *em.following], values, strict=True):
+        em.model.add(lit == int(val))
+    pinned = search(em, 5.0)
+    assert pinned is not None and pinned.optimal
+    assert np.array_equal(pinned.assignment.a_first, incumbent.a_first)
 
 
 def _row(variant: str, budget: float, optimal: bool, identical: bool | None, **kw) -> dict:
@@ -36,19 +63,19 @@ def test_summary_shares_milp_proofs_and_dtime() -> None:
 
 
 def test_quick_defaults_flags_and_variants() -> None:
-    skip = ("quick", "summarize", "cache")
-    assert config_from_args(_parse_args(["--quick"]), Config(), QUICK, skip) == QUICK
+    assert config_from_args(_parse_args(["--quick"]), Config(), QUICK) == QUICK
     cfg = config_from_args(
         _parse_args(["--variants", "lin2", "w2", "--budgets", "2", "--per-set", "1"]),
         Config(),
         QUICK,
-        skip,
     )
     assert cfg == replace(Config(), variants=("lin2", "w2"), budgets=(2.0,), per_set=1)
     assert all(v.hint in ("fcfs", "stage", "none") for v in VARIANTS.values())
     assert VARIANTS["default"].linearization == 1  # explicit: the service's default moved
-    cfg = config_from_args(_parse_args(["--objective", "max_completion"]), Config(), QUICK, skip)
-    assert cfg.objective == "max_completion"
+    cfg = config_from_args(
+        _parse_args(["--objective", "max_completion", "--worlds", "wh_two_way:25"]), Config(), QUICK
+    )
+    assert cfg.objective == "max_completion" and cfg.worlds == ("wh_two_way:25",)
 
 
 def test_quick_run_writes_everything(tmp_path: Path) -> None:
