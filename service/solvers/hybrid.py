@@ -14,7 +14,7 @@ from __future__ import annotations
 import time
 from dataclasses import replace
 
-from service.solvers.exact import solve
+from service.solvers.exact import improve
 from service.solvers.refine import gnn_vae_refined
 from service.solvers.registry import SolveContext, SolverOutput, register
 
@@ -31,24 +31,5 @@ def gnn_vae_exact(ctx: SolveContext) -> SolverOutput | None:
     remaining = ctx.time_limit_s - (time.perf_counter() - start)
     if remaining <= 0:
         return replace(learned, detail="no time left for CP-SAT")
-    result = solve(
-        ctx.problem,
-        ctx.cliques,
-        ctx.objective,
-        remaining,
-        seed=ctx.seed,
-        workers=ctx.workers,
-        hint=learned.assignment,
-        on_solution=ctx.on_solution,
-    )
-    if result is None:
-        return replace(learned, detail="CP-SAT found no solution in time")
-    found = ctx.evaluator.evaluate(result.assignment).costs[ctx.objective][0]
-    hinted = ctx.evaluator.evaluate(learned.assignment).costs[ctx.objective][0]
-    if found > hinted:  # the hint may be lost to CP-SAT's time scaling; keep the better
-        return replace(learned, detail="CP-SAT did not improve the hint")
-    if result.optimal:
-        detail = "proven optimal by CP-SAT"
-    else:
-        detail = "improved by CP-SAT" if found < hinted else "CP-SAT kept the hint, unproven"
-    return replace(learned, assignment=result.assignment, optimal=result.optimal, detail=detail)
+    improved, verdict = improve(ctx, learned, remaining)
+    return replace(improved, detail=verdict)

@@ -39,7 +39,7 @@ import numpy as np
 
 from service.core.assignment import Assignments
 from service.core.decompose import DECOMPOSABLE, Part, join, parts
-from service.solvers.exact import BUILD_S_PER_CONFLICT, solve
+from service.solvers.exact import BUILD_S_PER_CONFLICT, improve
 from service.solvers.registry import SolveContext, SolverOutput, get_solver, register
 from service.solvers.tabu import plain_start, tabu_search
 
@@ -108,31 +108,8 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
             if polished_cost < cost:  # the large solver stopped early (its own 1 s cap)
                 best, stages = replace(best, assignment=polished), [*stages, "tabu"]
         return replace(best, optimal=False, detail=_detail(stages, "no time for CP-SAT"))
-    result = solve(
-        problem,
-        ctx.cliques,
-        ctx.objective,
-        left,
-        seed=ctx.seed,
-        workers=ctx.workers,
-        hint=best.assignment,
-        on_solution=ctx.on_solution,
-    )
-    if result is None:
-        return replace(best, optimal=False, detail=_detail(stages, "CP-SAT found nothing"))
-    exact_cost = _cost(ctx, result.assignment)
-    if exact_cost > cost:  # the hint may be lost to CP-SAT's integer time scaling
-        return replace(best, optimal=False, detail=_detail(stages, "CP-SAT did not improve"))
-    verdict = "proven optimal by CP-SAT" if result.optimal else "improved by CP-SAT"
-    if exact_cost == cost and not result.optimal:
-        verdict = "CP-SAT kept it, unproven"
-    return SolverOutput(
-        result.assignment,
-        optimal=result.optimal,
-        model=best.model,
-        samples=best.samples,
-        detail=_detail(stages, verdict),
-    )
+    improved, verdict = improve(ctx, best, left)
+    return replace(improved, detail=_detail(stages, verdict))
 
 
 def _with_time(ctx: SolveContext, time_limit_s: float) -> SolveContext:
