@@ -40,7 +40,14 @@ from service.motion.dependencies import Decision, dependency_plan
 from service.motion.progress import progress_at, state_of
 from service.motion.trajectories import departure_times, realized_costs, trajectories
 from service.simulation.clearance import Clearance, Trajectory, check_clearance
-from service.simulation.executor import DependencyPlan, Execution, Run, State, execute
+from service.simulation.executor import (
+    DependencyPlan,
+    Execution,
+    Run,
+    State,
+    execute,
+    on_clock,
+)
 from service.simulation.simulate import plan_to_wire
 from service.solvers.dispatch import DispatchPolicy, InvalidAnswerError, dispatch
 
@@ -263,15 +270,9 @@ def _ahead(paths: list[RobotPath], plan: DependencyPlan, state: State | None) ->
     a robot already past its wait point, or done, no longer waits there."""
     if state is None:
         return plan
-    wait_clock = np.array(
-        [
-            paths[w].time_at(s)
-            for w, s in zip(plan.waiter.tolist(), plan.wait_s.tolist(), strict=True)
-        ]
-    )  # (D,)
-    keep = ~state.done[plan.waiter] & (
-        ~state.started[plan.waiter] | (wait_clock >= state.clock[plan.waiter])
-    )
+    wait_clock = on_clock(paths, plan.waiter, plan.wait_s)  # (D,)
+    # A robot not started stands at its start clock, before every wait point of its own.
+    keep = ~state.done[plan.waiter] & (wait_clock >= state.clock[plan.waiter])
     return DependencyPlan(
         plan.waiter[keep], plan.wait_s[keep], plan.waitee[keep], plan.until_s[keep]
     )

@@ -29,7 +29,7 @@ import numpy as np
 from service.geometry.paths import RobotPath
 from service.simulation.disturbances import Rate
 
-__all__ = ["DependencyPlan", "Execution", "Run", "State", "execute"]
+__all__ = ["DependencyPlan", "Execution", "Run", "State", "execute", "on_clock"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -163,8 +163,8 @@ class Execution:
         """Index ``plan``'s constraints; drop those whose waiter is past its wait point or
         done (moot). Returns how many were dropped."""
         n = len(self.paths)
-        wait_clock = _on_clock(self.paths, plan.waiter, plan.wait_s)  # (D,)
-        until_clock = _on_clock(self.paths, plan.waitee, plan.until_s)  # (D,)
+        wait_clock = on_clock(self.paths, plan.waiter, plan.wait_s)  # (D,)
+        until_clock = on_clock(self.paths, plan.waitee, plan.until_s)  # (D,)
         clock, done = np.array(self.clock), np.array(self.done, dtype=bool)  # (R,) each
         live = (wait_clock >= clock[plan.waiter]) & ~done[plan.waiter]  # (D,)
         waitee = plan.waitee[live]  # (D',)
@@ -333,7 +333,7 @@ class Execution:
         return Run(walls, clocks, np.array(self.completion), stuck)
 
 
-def _on_clock(paths: Sequence[RobotPath], robot: np.ndarray, s: np.ndarray) -> np.ndarray:
+def on_clock(paths: Sequence[RobotPath], robot: np.ndarray, s: np.ndarray) -> np.ndarray:
     """(D,) planned progress clock of each robot[d] at arc length s[d]."""
     out = np.empty(s.size)
     order = np.argsort(robot, kind="stable")
