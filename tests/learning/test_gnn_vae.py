@@ -19,7 +19,7 @@ from service.core.decode import Decoder, decode_candidates
 from service.core.evaluate import Evaluator
 from service.core.problem import problem_from_request
 from service.core.schemas import OBJECTIVES, ScheduleRequest
-from service.learning.data import DatasetConfig, build_dataset, solve_problem
+from service.datagen.build import DatasetConfig, build_dataset, solve_problem
 from service.learning.dataset import examples_from_records, to_data
 from service.learning.features import NODE_DIM, graph_tensors
 from service.learning.generate import GeneratorConfig, small_problem, stitched_problem
