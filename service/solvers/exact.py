@@ -134,12 +134,16 @@ BUILD_S_PER_CONFLICT = 1.2e-4
 
 @dataclass(frozen=True)
 class ExactResult:
-    """A CP-SAT answer: one assignment, whether its optimality was proven, and the work
-    done in CP-SAT's deterministic time units (machine-independent "seconds")."""
+    """A CP-SAT answer: one assignment, whether its optimality was proven, the work
+    done in CP-SAT's deterministic time units (machine-independent "seconds"), and the
+    relative gap (objective - best bound) / objective that CP-SAT left (0 when proven;
+    every objective is a positive multiple of its cost, so this is the cost's gap up to
+    the integer time scaling)."""
 
     assignment: Assignments
     optimal: bool
     deterministic_time: float
+    gap: float = 0.0
 
 
 def time_scale(problem: Problem) -> float:
@@ -340,6 +344,14 @@ def _read(
     )
 
 
+def _result(solver: cp_model.CpSolver, em: ExactModel, status: int) -> ExactResult:
+    """The answer of a solve that found a solution (status OPTIMAL or FEASIBLE)."""
+    optimal = status == cp_model.OPTIMAL
+    value, bound = solver.objective_value, solver.best_objective_bound
+    gap = 0.0 if optimal or value <= 0 else max(0.0, (value - bound) / value)
+    return ExactResult(_read(solver, em), optimal, solver.deterministic_time, gap)
+
+
 class _Incumbents(cp_model.CpSolverSolutionCallback):
     """Reports every improving solution as ``on_solution(wall_time_s, assignment)``."""
 
@@ -413,7 +425,7 @@ def search(
     status = solver.solve(em.model, callback)
     if status not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
         return None
-    return ExactResult(_read(solver, em), status == cp_model.OPTIMAL, solver.deterministic_time)
+    return _result(solver, em, status)
 
 
 def top_assignments(
@@ -424,28 +436,31 @@ def top_assignments(
     time_limit_s: float,
     seed: int = 0,
     workers: int = 1,
+    hint: Assignments | None = None,
 ) -> list[ExactResult]:
     """The ``count`` best distinct assignments, best first (fewer if fewer exist).
 
     CP-SAT has no top-k with an objective, so each next one is found by
     re-solving with a no-good clause over the direction and type literals of
-    every earlier one, hinted with the previous solution. ``time_limit_s`` is
-    per solve; a solve that does not prove optimality is kept with
-    ``optimal=False`` and ends the enumeration.
+    every earlier one, hinted with the previous solution (the first solve with
+    ``hint``, if given). ``time_limit_s`` is per solve; a solve that does not
+    prove optimality is kept with ``optimal=False`` and its gap, and ends the
+    enumeration.
     """
     em = build_model(problem, cliques, objective)
+    if hint is not None:
+        em.add_hint(hint)
     results: list[ExactResult] = []
     while len(results) < count:
         solver = _params(time_limit_s, seed, workers, {"linearization_level": em.linearization})
         status = solver.solve(em.model)
         if status not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
             break
-        found = _read(solver, em)
-        results.append(ExactResult(found, status == cp_model.OPTIMAL, solver.deterministic_time))
+        results.append(_result(solver, em, status))
         if status != cp_model.OPTIMAL:
             break
-        em.exclude(found)
-        em.add_hint(found)
+        em.exclude(results[-1].assignment)
+        em.add_hint(results[-1].assignment)
     return results
 
 
