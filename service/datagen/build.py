@@ -1,15 +1,25 @@
-"""Training data for the GNN-VAE: random problems with their top-L exact assignments.
+"""Training data for the GNN-VAE: seeded problems with their best exact assignments.
 
 ``python -m service.datagen --out data/small-v1 --problems 10000`` writes a
 versioned dataset directory in the format of :mod:`service.learning.data`:
-shards of one JSON record per problem, targets best first (CP-SAT top-L with
-no-good clauses), and a manifest with the settings, counts and a SHA-256 over
-the shards.
+shards of one JSON record per problem, targets best first, and a manifest with
+the settings, counts (per kind, proven share per objective) and a SHA-256 over
+the shards. Kinds (``--kind``):
+
+* ``small`` (default): the published generator, CP-SAT's top-L;
+* ``stitched``: stitched problems of 10-40 robots, CP-SAT's best within the limit;
+* ``scenario``: graphs derived from generated worlds (:mod:`service.datagen.worlds`;
+  ``--kinds`` / ``--hold-out`` choose the world kinds, ``--robots`` the range),
+  labelled by the exact portfolio with each label's gap
+  (:mod:`service.datagen.labels`); records add ``"world": {"kind", "robots",
+  "seed", "redraws"}``.
 
 Problem ``i`` is generated from ``SeedSequence([seed, i])`` and solved by CP-SAT
 with one worker and a fixed seed, so a dataset is reproducible from its
-manifest. Shards are written atomically and skipped when present, so an
-interrupted run resumes where it stopped. Workers are separate processes.
+manifest wherever labels are proven (a label cut by the time limit depends on
+the machine's speed). Shards are written atomically and skipped when present,
+so an interrupted run resumes where it stopped. Shards run on local processes
+(``--workers``).
 """
 
 from __future__ import annotations
@@ -18,50 +28,33 @@ import argparse
 import hashlib
 import json
 import os
-from concurrent.futures import ProcessPoolExecutor
-from dataclasses import asdict, dataclass, field
+from collections import Counter
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from tqdm import tqdm
 
-from service.core.cliques import find_cliques
-from service.core.evaluate import Evaluator
 from service.core.problem import problem_from_request
 from service.core.schemas import OBJECTIVES, ScheduleRequest
-from service.learning.data import DATASET_FORMAT, MANIFEST, shard_path
+from service.datagen.config import DATASET_KINDS, DatasetConfig, ScenarioConfig, config_dict
+from service.datagen.executors import Executor, run_shards
+from service.datagen.labels import contexts, portfolio_labels, top_labels
+from service.datagen.worlds import draw_world
+from service.learning.data import DATASET_FORMAT, MANIFEST, iter_problems, shard_path
 from service.learning.generate import GeneratorConfig, small_problem, stitched_problem
-from service.solvers.exact import top_assignments
+from service.scenarios import KINDS
 
-__all__ = ["DatasetConfig", "build_dataset", "main", "solve_problem"]
-
-
-@dataclass(frozen=True)
-class DatasetConfig:
-    """Everything that determines a dataset's content."""
-
-    problems: int = 10_000
-    seed: int = 0
-    top: int = 10  # L: best assignments kept per problem and objective
-    objectives: tuple[str, ...] = OBJECTIVES
-    shard_size: int = 100
-    solve_time_limit_s: float = 10.0  # per CP-SAT solve; small problems take ~10 ms
-    generator: GeneratorConfig = field(default_factory=GeneratorConfig)
-    # "small": the published generator; "stitched": problems of robots in
-    # ``stitched_robots`` with conflicts per robot uniform in ``stitched_density``,
-    # labelled by CP-SAT's best within ``solve_time_limit_s`` (not always proven).
-    kind: str = "small"
-    stitched_robots: tuple[int, int] = (10, 40)
-    stitched_density: tuple[float, float] = (1.5, 4.0)
+__all__ = ["build_dataset", "main", "problem_seed", "shard_text", "solve_problem"]
 
 
-def _bits(mask: np.ndarray) -> str:
-    return "".join("1" if x else "0" for x in mask.tolist())
+def problem_seed(cfg: DatasetConfig, index: int) -> int:
+    """The seed of problem ``index``: independent streams per index (``SeedSequence``)."""
+    return int(np.random.SeedSequence([cfg.seed, index]).generate_state(1)[0])
 
 
-def _generate(cfg: DatasetConfig, seed: int) -> dict[str, Any]:
-    """The problem of ``seed`` for the dataset's kind."""
+def _generated(cfg: DatasetConfig, seed: int) -> dict[str, Any]:
+    """The request of ``seed`` for the small and stitched kinds (objective included)."""
     if cfg.kind == "small":
         return small_problem(seed, cfg.objectives[0], cfg.generator)
     rng = np.random.default_rng(seed)
@@ -70,85 +63,111 @@ def _generate(cfg: DatasetConfig, seed: int) -> dict[str, Any]:
     return stitched_problem(seed, robots, density, cfg.objectives[0], cfg.generator)
 
 
+def _targets(cfg: DatasetConfig, request: ScheduleRequest) -> dict[str, list[dict[str, Any]]]:
+    """The labels of every objective (top-L, or the portfolio's for the scenario kind)."""
+    labeller = portfolio_labels if cfg.kind == "scenario" else top_labels
+    problem = problem_from_request(request)
+    return {
+        objective: labeller(ctx, cfg.top)
+        for objective, ctx in contexts(problem, cfg.objectives, cfg.solve_time_limit_s).items()
+    }
+
+
 def solve_problem(cfg: DatasetConfig, index: int) -> dict[str, Any]:
-    """Generate problem ``index`` and its top-L assignments for every objective."""
-    seed = int(np.random.SeedSequence([cfg.seed, index]).generate_state(1)[0])
-    request = _generate(cfg, seed)
-    problem = problem_from_request(ScheduleRequest.model_validate(request))
-    cliques = find_cliques(problem)
-    evaluator = Evaluator(problem)
-    targets: dict[str, list[dict[str, Any]]] = {}
-    for objective in cfg.objectives:
-        found = top_assignments(
-            problem, cliques, objective, cfg.top, cfg.solve_time_limit_s, seed=0
-        )
-        targets[objective] = [
-            {
-                "a_first": _bits(r.assignment.a_first[0]),
-                "following": _bits(r.assignment.following[0]),
-                "cost": float(evaluator.evaluate(r.assignment).costs[objective][0]),
-                "optimal": r.optimal,
-            }
-            for r in found
-        ]
-    del request["objective"]
-    return {"index": index, "seed": seed, "request": request, "targets": targets}
+    """The record of problem ``index``: its request (without objective) and its labels."""
+    seed = problem_seed(cfg, index)
+    if cfg.kind != "scenario":
+        request = _generated(cfg, seed)
+        targets = _targets(cfg, ScheduleRequest.model_validate(request))
+        del request["objective"]
+        return {"index": index, "seed": seed, "request": request, "targets": targets}
+    assert cfg.scenario is not None  # resolved by DatasetConfig
+    drawn = draw_world(cfg.scenario, seed)
+    return {
+        "index": index,
+        "seed": seed,
+        "world": drawn.world_record(),
+        "request": drawn.request.model_dump(
+            mode="json", by_alias=True, exclude_none=True, exclude={"objective", "options"}
+        ),
+        "targets": _targets(cfg, drawn.request),
+    }
 
 
-def _solve_shard(args: tuple[DatasetConfig, int, str]) -> int:
-    """Solve one shard and write it atomically; returns the shard number."""
-    cfg, shard, out = args
-    path = shard_path(Path(out), shard)
+def shard_text(cfg: DatasetConfig, shard: int) -> str:
+    """The text of shard ``shard``: one JSON line per problem of its index range."""
     start = shard * cfg.shard_size
     stop = min(start + cfg.shard_size, cfg.problems)
     lines = [json.dumps(solve_problem(cfg, i), separators=(",", ":")) for i in range(start, stop)]
+    return "\n".join(lines) + "\n"
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    """Write ``path`` so that it is either absent or complete (a shard's presence means done)."""
     tmp = path.with_suffix(".tmp")
-    tmp.write_text("\n".join(lines) + "\n")
+    tmp.write_text(text)
     os.replace(tmp, path)
-    return shard
 
 
-def _config_dict(cfg: DatasetConfig) -> dict[str, Any]:
-    """The config as it reads back from the manifest (tuples become lists)."""
-    return json.loads(json.dumps(asdict(cfg)))
+def _counts(cfg: DatasetConfig, out: Path) -> dict[str, Any]:
+    """Problems per world kind, the share whose best label is proven per objective, and the
+    worlds redrawn (refused or conflict-free) on the way."""
+    kinds: Counter[str] = Counter()
+    proven: Counter[str] = Counter()
+    redraws, total = 0, 0
+    for record in iter_problems(out):
+        world = record.get("world", {"kind": cfg.kind})
+        kinds[world["kind"]] += 1
+        redraws += world.get("redraws", 0)
+        proven.update(o for o, ts in record["targets"].items() if ts and ts[0]["optimal"])
+        total += 1
+    return {
+        "kinds": dict(sorted(kinds.items())),
+        "proven": {o: round(proven[o] / max(total, 1), 4) for o in cfg.objectives},
+        "redraws": redraws,
+    }
 
 
-def build_dataset(cfg: DatasetConfig, out: Path, workers: int = 2) -> dict[str, Any]:
-    """Write (or resume) the dataset at ``out``; returns its manifest."""
+def build_dataset(
+    cfg: DatasetConfig, out: Path, workers: int = 2, executor: Executor | None = None
+) -> dict[str, Any]:
+    """Write (or resume) the dataset at ``out``; returns its manifest.
+
+    ``executor`` (default: ``workers`` local processes) says where shards run.
+    """
+    executor = executor or Executor("local", workers)
     out.mkdir(parents=True, exist_ok=True)
     manifest_path = out / MANIFEST
     if manifest_path.exists():
         old = json.loads(manifest_path.read_text())
-        if old["config"] != _config_dict(cfg):
+        if old["config"] != config_dict(cfg):
             raise SystemExit(f"{out} holds a dataset with other settings; choose another --out")
     n_shards = -(-cfg.problems // cfg.shard_size)
     todo = [s for s in range(n_shards) if not shard_path(out, s).exists()]
-    manifest_path.write_text(
-        json.dumps(
-            {"format": DATASET_FORMAT, "config": _config_dict(cfg), "complete": False}, indent=1
-        )
-    )
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        jobs = pool.map(_solve_shard, [(cfg, s, str(out)) for s in todo])
-        for _ in tqdm(jobs, total=len(todo), desc="shards", unit="shard"):
-            pass
+    head = {"format": DATASET_FORMAT, "config": config_dict(cfg)}
+    manifest_path.write_text(json.dumps({**head, "complete": False}, indent=1))
+    left = sum(min(cfg.shard_size, cfg.problems - s * cfg.shard_size) for s in todo)
+    with tqdm(total=left, desc="problems", unit="problem", smoothing=0.1) as bar:
+        for shard, text in run_shards(shard_text, cfg, todo, executor):
+            _write_atomic(shard_path(out, shard), text)
+            bar.update(text.count("\n"))
     digest = hashlib.sha256()
     for s in range(n_shards):
         digest.update(shard_path(out, s).read_bytes())
     manifest = {
-        "format": DATASET_FORMAT,
-        "config": _config_dict(cfg),
+        **head,
         "complete": True,
         "shards": n_shards,
         "problems": cfg.problems,
         "sha256": digest.hexdigest(),
+        "counts": _counts(cfg, out),
     }
     manifest_path.write_text(json.dumps(manifest, indent=1))
     return manifest
 
 
-def main(argv: list[str] | None = None) -> None:
-    """CLI entry: build or resume a dataset."""
+def _parser() -> argparse.ArgumentParser:
+    """The command line's options."""
     parser = argparse.ArgumentParser(
         prog="python -m service.datagen", description=__doc__.splitlines()[0]
     )
@@ -164,10 +183,30 @@ def main(argv: list[str] | None = None) -> None:
         default=1.0,
         help="multiply every generated time (tests time-scale invariance)",
     )
-    parser.add_argument("--kind", choices=("small", "stitched"), default="small")
+    parser.add_argument("--kind", choices=DATASET_KINDS, default="small")
     parser.add_argument("--objectives", nargs="+", choices=OBJECTIVES, default=list(OBJECTIVES))
     parser.add_argument("--solve-time-limit", type=float, default=DatasetConfig.solve_time_limit_s)
+    scenario = parser.add_argument_group("scenario kind")
+    scenario.add_argument("--kinds", nargs="+", choices=list(KINDS), help="world kinds (all)")
+    scenario.add_argument("--hold-out", nargs="+", choices=list(KINDS), default=[])
+    scenario.add_argument("--robots", nargs=2, type=int, metavar=("LOW", "HIGH"))
+    return parser
+
+
+def _scenario_config(args: argparse.Namespace) -> ScenarioConfig:
+    """The scenario settings of the command line (defaults where a flag is absent)."""
+    kinds = [k for k in (args.kinds or ScenarioConfig.kinds) if k not in args.hold_out]
+    robots = tuple(args.robots) if args.robots else ScenarioConfig.robots
+    return ScenarioConfig(kinds=tuple(kinds), robots=robots)
+
+
+def main(argv: list[str] | None = None) -> None:
+    """CLI entry: build or resume a dataset."""
+    parser = _parser()
     args = parser.parse_args(argv)
+    scenario_flags = args.kinds or args.hold_out or args.robots
+    if scenario_flags and args.kind != "scenario":
+        parser.error("--kinds, --hold-out and --robots are for --kind scenario")
     cfg = DatasetConfig(
         problems=args.problems,
         seed=args.seed,
@@ -177,9 +216,11 @@ def main(argv: list[str] | None = None) -> None:
         kind=args.kind,
         objectives=tuple(args.objectives),
         solve_time_limit_s=args.solve_time_limit,
+        scenario=_scenario_config(args) if args.kind == "scenario" else None,
     )
-    manifest = build_dataset(cfg, args.out, args.workers)
-    print(json.dumps({k: manifest[k] for k in ("problems", "shards", "sha256")}))
+    executor = Executor("local", args.workers)
+    manifest = build_dataset(cfg, args.out, executor=executor)
+    print(json.dumps({k: manifest[k] for k in ("problems", "shards", "sha256", "counts")}))
 
 
 if __name__ == "__main__":
