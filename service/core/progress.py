@@ -29,7 +29,11 @@ against the shifted plan. Points are named by their planned time
 
 from __future__ import annotations
 
+import itertools
+import operator
+from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -105,15 +109,14 @@ def previous_from_wire(problem: Problem, wire: list[PreviousConflictIn]) -> Assi
             conflict decided twice, a fixed direction reversed) or ``previous``
             (conflicts left undecided).
     """
-    index = problem.node_index
-    u = np.array([index.get(e.from_, -1) for e in wire], dtype=np.int64)  # (K,)
-    v = np.array([index.get(e.to, -1) for e in wire], dtype=np.int64)  # (K,)
+    u = _column(wire, "from_", problem.node_index.get, -1, np.int64)  # (K,) node or -1
+    v = _column(wire, "to", problem.node_index.get, -1, np.int64)  # (K,)
     errors = [
         _error(("previous", i, side), f"unknown node id '{getattr(wire[i], attr)}'")
         for side, attr, ends in (("from", "from_", u), ("to", "to", v))
         for i in np.flatnonzero(ends < 0)[:50].tolist()
     ]
-    m = _conflict_of(problem, u, v)  # (K,) conflict index or -1
+    m = problem.conflict_between(u, v)  # (K,) conflict index or -1
     known = (u >= 0) & (v >= 0)
     errors += [
         _error(("previous", i), f"no conflict joins '{wire[i].from_}' and '{wire[i].to}'")
@@ -131,9 +134,8 @@ def previous_from_wire(problem: Problem, wire: list[PreviousConflictIn]) -> Assi
     a_first = np.zeros(problem.n_conflicts, dtype=bool)
     following = np.zeros(problem.n_conflicts, dtype=bool)
     a_first[m[found]] = u[found] == problem.conf_a[m[found]]
-    following[m[found]] = np.array(
-        [wire[i].type == "following" for i in found.tolist()], dtype=bool
-    )
+    is_following = _column(wire, "type", operator.eq, "following", bool)  # (K,)
+    following[m[found]] = is_following[found]
     reversed_ = (problem.forced != 0) & (first_seen >= 0) & (a_first != (problem.forced > 0))
     errors += [
         _error(("previous", int(first_seen[c])), f"reverses the fixed direction of conflict {c}")
@@ -153,18 +155,13 @@ def previous_from_wire(problem: Problem, wire: list[PreviousConflictIn]) -> Assi
     return Assignments.single(a_first, following)
 
 
-def _conflict_of(problem: Problem, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """(K,) the conflict joining nodes u and v (K,) in either order, or -1."""
-    if problem.n_conflicts == 0:
-        return np.full(u.size, -1, dtype=np.int64)
-    n = problem.n_nodes
-    a, b = problem.conf_a, problem.conf_b
-    keys = np.minimum(a, b) * n + np.maximum(a, b)  # (M,) unique: one conflict per node pair
-    order = np.argsort(keys)
-    wanted = np.minimum(u, v) * n + np.maximum(u, v)  # (K,)
-    pos = np.minimum(np.searchsorted(keys[order], wanted), keys.size - 1)  # (K,)
-    hit = (u >= 0) & (v >= 0) & (keys[order][pos] == wanted)
-    return np.where(hit, order[pos], -1)
+def _column(
+    wire: list[PreviousConflictIn], field: str, f: Callable[[Any, Any], Any], arg: Any, dtype: type
+) -> np.ndarray:
+    """(K,) ``f(entry.<field>, arg)`` of every entry: the C-level map of a 20,000-entry
+    ``previous`` (a Python loop per column cost twice as much)."""
+    values = map(f, map(operator.attrgetter(field), wire), itertools.repeat(arg))
+    return np.fromiter(values, dtype=dtype, count=len(wire))
 
 
 def _shifts(problem: Problem, progress: Progress) -> tuple[np.ndarray, np.ndarray]:

@@ -6,10 +6,12 @@ from typing import Any
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from service.core.assignment import Assignments
 from service.core.problem import ProblemError
-from service.core.schemas import ScheduleRequest
+from service.core.schemas import ScheduleRequest, ScheduleResponse
 from service.learning.generate import small_problem
 from service.solvers import registry
 from service.solvers.dispatch import DispatchPolicy, dispatch
@@ -96,3 +98,23 @@ def test_fcfs_response() -> None:
     response = dispatch(_request(small_problem(4), solver="fcfs"), POLICY)
     assert response.solver.name == "fcfs" and not response.solver.optimal
     assert np.isfinite(response.cost)
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    seed=st.integers(0, 10_000),
+    solver=st.sampled_from(["fcfs", "exact", "tabu", "auto"]),
+    objective=st.sampled_from(["avg_completion", "max_completion", "sync_completion"]),
+)
+def test_rendered_answer_is_what_validation_makes_of_it(
+    seed: int, solver: str, objective: str
+) -> None:
+    """Answers are constructed without validation (speed): they must be exactly what the
+    response model makes of their own dump, field types included."""
+    req = small_problem(seed, objective)
+    response = dispatch(_request(req, solver=solver, time_limit_s=1.0), POLICY)
+    dumped = response.model_dump(by_alias=True)
+    again = ScheduleResponse.model_validate(dumped)
+    assert again.model_dump(by_alias=True) == dumped
+    assert again.model_dump_json(by_alias=True) == response.model_dump_json(by_alias=True)
+    assert all(type(n.enter) is float for r in response.schedule for n in r.nodes)
