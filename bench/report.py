@@ -26,6 +26,7 @@ __all__ = [
     "format_table",
     "jsonable",
     "machine_info",
+    "markdown_table",
     "nanmean",
     "plot_solve_times",
     "summarize_solves",
@@ -157,6 +158,13 @@ def format_table(headers: Sequence[str], rows: Iterable[Sequence[Any]]) -> str:
 
     rule = "  ".join("-" * w for w in widths)
     return "\n".join([line(cells[0]), rule, *(line(r) for r in cells[1:])])
+
+
+def markdown_table(headers: Sequence[str], rows: Iterable[Sequence[Any]]) -> str:
+    """A Markdown (pipe) table of the rows' cells as strings."""
+    lines = ["| " + " | ".join(map(str, headers)) + " |", "|" + "---|" * len(headers)]
+    lines += ["| " + " | ".join(map(str, row)) + " |" for row in rows]
+    return "\n".join(lines)
 
 
 def _cpu_model() -> str:
