@@ -33,7 +33,6 @@ budgets: its answer would be the same (``reused`` in the raw rows). Under
 from __future__ import annotations
 
 import argparse
-import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -51,6 +50,7 @@ from bench.cases import (
     measured,
     run_cli,
     service_policy,
+    solve_case,
     summarize,
     world_cases,
 )
@@ -60,10 +60,11 @@ from bench.report import (
     jsonable,
     machine_info,
     nanmean,
+    plot_lines,
     write_csv,
     write_json,
 )
-from service.solvers.dispatch import DispatchPolicy, solve_problem
+from service.solvers.dispatch import DispatchPolicy
 
 __all__ = ["METHODS", "QUICK", "Config", "main", "run"]
 
@@ -131,12 +132,7 @@ def run_method(
     solver, large = METHODS[method]
     policy = replace(policy, large_solver=large)
     options = {"solver": solver, "time_limit_s": budget_s, "seed": cfg.base_seed}
-    request = case.request.model_copy(
-        update={"options": case.request.options.model_copy(update=options)}
-    )
-    start = time.perf_counter()
-    answer = solve_problem(case.problem, request, policy, cliques=case.cliques)
-    runtime = time.perf_counter() - start
+    answer, runtime = solve_case(case, policy, options)
     return {
         "method": method,
         "family": case.family,
@@ -293,43 +289,6 @@ def overrun_table(rows: Sequence[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
-def plot(summary: Sequence[dict[str, Any]], key: str, label: str, path: Path) -> None:
-    """``key`` against the budget: one panel per family, one line per method (log budget axis)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    families = list(dict.fromkeys(s["family"] for s in summary))
-    cols = min(5, len(families))
-    nrows = -(-len(families) // cols)
-    fig, axes = plt.subplots(
-        nrows, cols, figsize=(3.6 * cols, 3.2 * nrows), squeeze=False, sharex=True
-    )
-    for ax, family in zip(axes.ravel(), families, strict=False):
-        for method in dict.fromkeys(s["method"] for s in summary):
-            sel = sorted(
-                (s for s in summary if s["family"] == family and s["method"] == method),
-                key=lambda s: s["budget_s"],
-            )
-            ax.plot([s["budget_s"] for s in sel], [s[key] for s in sel], "o-", ms=3, label=method)
-        n = next(s["problems"] for s in summary if s["family"] == family)
-        ax.set_title(f"{family} (n = {n})", fontsize="medium")
-        ax.set_xscale("log")
-        ax.grid(True, which="both", alpha=0.3)
-    for ax in axes.ravel()[len(families) :]:
-        ax.set_visible(False)
-    for ax in axes[-1]:
-        ax.set_xlabel("budget (s)")
-    for ax in axes[:, 0]:
-        ax.set_ylabel(label)
-    handles, labels = axes[0, 0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=len(labels), frameon=False)
-    fig.tight_layout(rect=(0, 0.06 / nrows, 1, 1))
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-
-
 def report(results: dict[str, Any], out: Path) -> str:
     """Write tables, plots and raw files under ``out``; return the tables' text."""
     out.mkdir(parents=True, exist_ok=True)
@@ -354,8 +313,8 @@ def report(results: dict[str, Any], out: Path) -> str:
     (out / "tables.md").write_text(text + "\n")
     write_json(out / "results.json", results)
     write_csv(out / "results.csv", rows)
-    plot(summary, "delay_ratio_mean", "mean delay ratio", out / "anytime.png")
-    plot(summary, "ratio_mean", "mean cost ratio", out / "anytime-cost.png")
+    plot_lines(summary, "delay_ratio_mean", "mean delay ratio", out / "anytime.png")
+    plot_lines(summary, "ratio_mean", "mean cost ratio", out / "anytime-cost.png")
     return text
 
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,12 +28,12 @@ from service.core.cliques import Cliques, find_cliques
 from service.core.evaluate import Evaluator
 from service.core.path_schemas import PathsRequest
 from service.core.problem import Problem, ProblemError, problem_from_request
-from service.core.schemas import Objective, ScheduleRequest
+from service.core.schemas import Objective, ScheduleRequest, ScheduleResponse
 from service.geometry.graph import GeometrySettings
 from service.motion.plan import derive
 from service.scenarios import generate
 from service.settings import Settings
-from service.solvers.dispatch import DispatchPolicy
+from service.solvers.dispatch import DispatchPolicy, solve_problem
 
 __all__ = [
     "CONFORMANCE",
@@ -45,7 +46,9 @@ __all__ = [
     "measured",
     "run_cli",
     "service_policy",
+    "solve_case",
     "summarize",
+    "with_options",
     "world_case",
     "world_cases",
 ]
@@ -190,6 +193,25 @@ def measured(case: Case, rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]
         }
         for r in rows
     ]
+
+
+def with_options(request: ScheduleRequest, options: dict[str, Any]) -> ScheduleRequest:
+    """``request`` with ``options`` (solver, time_limit_s, seed, samples, ...) replacing its own."""
+    return request.model_copy(update={"options": request.options.model_copy(update=options)})
+
+
+def solve_case(
+    case: Case, policy: DispatchPolicy, options: dict[str, Any]
+) -> tuple[ScheduleResponse, float]:
+    """``case`` through the dispatcher with ``options``, and the seconds it took.
+
+    The problem and cliques are the case's, built once: the time is the solve, its
+    check and the rendering of its answer, not the request's validation.
+    """
+    request = with_options(case.request, options)
+    start = time.perf_counter()
+    answer = solve_problem(case.problem, request, policy, cliques=case.cliques)
+    return answer, time.perf_counter() - start
 
 
 def service_policy(store: Path) -> DispatchPolicy:

@@ -28,6 +28,7 @@ __all__ = [
     "machine_info",
     "markdown_table",
     "nanmean",
+    "plot_lines",
     "plot_solve_times",
     "summarize_solves",
     "write_csv",
@@ -290,4 +291,54 @@ def plot_solve_times(summary: Sequence[dict[str, Any]], time_limit_s: float, pat
     legend_rows = -(-(2 * len(series) + 1) // 3)  # ceil(entries / 3 columns)
     fig.tight_layout(rect=(0, (0.045 * legend_rows + 0.02) / nrows, 1, 1))
     fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def plot_lines(
+    summary: Sequence[dict[str, Any]],
+    key: str,
+    label: str,
+    path: Path,
+    *,
+    x: str = "budget_s",
+    xlabel: str = "budget (s)",
+    panel: str = "family",
+    line: str = "method",
+) -> None:
+    """``key`` against ``x`` (log axis): one panel per value of ``panel``, one line per value
+    of ``line``; each panel titled with its problems per point (a range where they differ)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    panels = list(dict.fromkeys(s[panel] for s in summary))
+    cols = min(5, len(panels))
+    nrows = -(-len(panels) // cols)
+    fig, axes = plt.subplots(
+        nrows, cols, figsize=(3.6 * cols, 3.2 * nrows), squeeze=False, sharex=True
+    )
+    for ax, name in zip(axes.ravel(), panels, strict=False):
+        for member in dict.fromkeys(s[line] for s in summary):
+            sel = sorted(
+                (s for s in summary if s[panel] == name and s[line] == member),
+                key=lambda s: s[x],
+            )
+            ax.plot([s[x] for s in sel], [s[key] for s in sel], "o-", ms=3, label=member)
+        n = sorted({s["problems"] for s in summary if s[panel] == name})
+        count = str(n[0]) if n[0] == n[-1] else f"{n[0]}-{n[-1]}"
+        ax.set_title(f"{name} (n = {count})", fontsize="medium")
+        ax.set_xscale("log")
+        ax.grid(True, which="both", alpha=0.3)
+    for ax in axes.ravel()[len(panels) :]:
+        ax.set_visible(False)
+    for ax in axes[-1]:
+        ax.set_xlabel(xlabel)
+    for ax in axes[:, 0]:
+        ax.set_ylabel(label)
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    ncol = min(len(labels), 2 * cols)  # about two entries fit beside each other per panel
+    fig.legend(handles, labels, loc="lower center", ncol=ncol, frameon=False)
+    fig.tight_layout(rect=(0, 0.06 * -(-len(labels) // ncol) / nrows, 1, 1))
+    fig.savefig(path, dpi=100)
     plt.close(fig)
