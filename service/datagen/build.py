@@ -19,7 +19,9 @@ with one worker and a fixed seed, so a dataset is reproducible from its
 manifest wherever labels are proven (a label cut by the time limit depends on
 the machine's speed). Shards are written atomically and skipped when present,
 so an interrupted run resumes where it stopped. Shards run on local processes
-(``--workers``).
+(``--workers``) or, with ``--executor ray`` or ``--address``, as Ray tasks
+(:mod:`service.datagen.executors`); every node then needs this package installed
+at the same version.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ import hashlib
 import json
 import os
 from collections import Counter
+from itertools import takewhile, zip_longest
 from pathlib import Path
 from typing import Any
 
@@ -45,7 +48,15 @@ from service.learning.data import DATASET_FORMAT, MANIFEST, iter_problems, shard
 from service.learning.generate import GeneratorConfig, small_problem, stitched_problem
 from service.scenarios import KINDS
 
-__all__ = ["build_dataset", "main", "problem_seed", "shard_text", "solve_problem"]
+__all__ = [
+    "agree_where_proven",
+    "build_dataset",
+    "datasets_agree",
+    "main",
+    "problem_seed",
+    "shard_text",
+    "solve_problem",
+]
 
 
 def problem_seed(cfg: DatasetConfig, index: int) -> int:
@@ -92,6 +103,33 @@ def solve_problem(cfg: DatasetConfig, index: int) -> dict[str, Any]:
         ),
         "targets": _targets(cfg, drawn.request),
     }
+
+
+def _problem_part(record: dict[str, Any]) -> dict[str, Any]:
+    return {key: value for key, value in record.items() if key != "targets"}
+
+
+def _both_proven(pair: tuple[dict[str, Any], dict[str, Any]]) -> bool:
+    return pair[0]["optimal"] and pair[1]["optimal"]
+
+
+def agree_where_proven(first: dict[str, Any], second: dict[str, Any]) -> bool:
+    """Whether two builds of a record agree wherever both proved their labels: the same
+    problem, and per objective the same targets as far as both are proven (a label cut by
+    the time limit depends on the machine's speed, and so does how many labels are proven)."""
+    return _problem_part(first) == _problem_part(second) and all(
+        one == other
+        for objective, targets in first["targets"].items()
+        for one, other in takewhile(
+            _both_proven, zip(targets, second["targets"][objective], strict=False)
+        )
+    )
+
+
+def datasets_agree(first: Path, second: Path) -> bool:
+    """Whether two datasets hold the same problems and agree wherever both proved labels."""
+    pairs = zip_longest(iter_problems(first), iter_problems(second))
+    return all(a is not None and b is not None and agree_where_proven(a, b) for a, b in pairs)
 
 
 def shard_text(cfg: DatasetConfig, shard: int) -> str:
@@ -190,6 +228,9 @@ def _parser() -> argparse.ArgumentParser:
     scenario.add_argument("--kinds", nargs="+", choices=list(KINDS), help="world kinds (all)")
     scenario.add_argument("--hold-out", nargs="+", choices=list(KINDS), default=[])
     scenario.add_argument("--robots", nargs=2, type=int, metavar=("LOW", "HIGH"))
+    cluster = parser.add_argument_group("where shards run")
+    cluster.add_argument("--executor", choices=("local", "ray"), default="local")
+    cluster.add_argument("--address", help="a Ray cluster to join (auto, host:port): implies ray")
     return parser
 
 
@@ -218,7 +259,7 @@ def main(argv: list[str] | None = None) -> None:
         solve_time_limit_s=args.solve_time_limit,
         scenario=_scenario_config(args) if args.kind == "scenario" else None,
     )
-    executor = Executor("local", args.workers)
+    executor = Executor(args.executor, args.workers, args.address)
     manifest = build_dataset(cfg, args.out, executor=executor)
     print(json.dumps({k: manifest[k] for k in ("problems", "shards", "sha256", "counts")}))
 

@@ -10,17 +10,24 @@ from pathlib import Path
 
 import pytest
 
-from service.datagen.build import build_dataset, main, solve_problem
+from service.datagen.build import (
+    agree_where_proven,
+    build_dataset,
+    datasets_agree,
+    main,
+    solve_problem,
+)
 from service.datagen.config import DatasetConfig, config_dict
 from service.datagen.executors import Executor
 from service.learning.data import iter_problems, load_manifest, shard_path
 from service.learning.generate import GeneratorConfig
-from tests.datagen.conftest import HELD_OUT, TINY, proven_view
+from tests.datagen.conftest import HELD_OUT, TINY
+from tests.imports import imported_modules
 
 
 def test_a_seed_gives_the_same_dataset(tiny_dataset: Path, tmp_path: Path) -> None:
     again = build_dataset(TINY, tmp_path / "again", executor=Executor("local", workers=2))
-    assert proven_view(tmp_path / "again") == proven_view(tiny_dataset)
+    assert datasets_agree(tmp_path / "again", tiny_dataset)
     assert again["sha256"] == load_manifest(tiny_dataset)["sha256"]  # TINY proves every label
     other = build_dataset(replace(TINY, seed=1), tmp_path / "other", workers=1)
     assert other["sha256"] != again["sha256"]
@@ -81,3 +88,29 @@ def test_the_command_line_holds_kinds_out(tmp_path: Path, capsys: pytest.Capture
     with pytest.raises(SystemExit):
         main(["--out", str(tmp_path / "x"), "--kinds", "wh_one_way"])  # not the scenario kind
     assert not os.path.exists(tmp_path / "x")
+
+
+def test_building_locally_does_not_need_ray() -> None:
+    assert imported_modules("service.datagen.build", "ray") == []
+
+
+def test_builds_agree_where_both_proved_a_label() -> None:
+    record = solve_problem(TINY, 0)
+    objective = TINY.objectives[0]
+    proven, cut = (
+        record["targets"][objective][0],
+        {
+            **record["targets"][objective][0],
+            "optimal": False,
+            "cost": 1e9,
+        },
+    )
+
+    def with_targets(*targets: dict) -> dict:
+        return {**record, "targets": {**record["targets"], objective: list(targets)}}
+
+    assert agree_where_proven(with_targets(proven, proven), with_targets(proven))
+    assert agree_where_proven(with_targets(proven, cut), with_targets(proven, proven))
+    assert agree_where_proven(with_targets(cut), with_targets(proven))
+    assert not agree_where_proven(with_targets({**proven, "cost": 0.0}), with_targets(proven))
+    assert not agree_where_proven({**record, "seed": 1}, record)

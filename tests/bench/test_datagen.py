@@ -1,0 +1,21 @@
+"""bench.datagen: a measurement's rows, projection and agreement check (one local process)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from bench.datagen import PROJECTED_PROBLEMS, Config, measure, report
+
+
+def test_a_local_measurement_projects_and_checks_agreement(tmp_path: Path) -> None:
+    cfg = Config(problems=2, nodes=(), local=True, robots=(5, 6), top=1, solve_time_limit_s=1.0)
+    rows = measure(cfg, tmp_path)
+    results = report(cfg, rows)
+    (run,) = results["runs"]
+    assert results["agree"] and run["cpus"] == 1
+    assert run["problems_per_s"] == pytest.approx(2 / run["seconds"], rel=0.1)
+    assert run["projected_hours"] == pytest.approx(
+        PROJECTED_PROBLEMS / run["problems_per_s"] / 3600, rel=0.01
+    )
