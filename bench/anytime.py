@@ -55,20 +55,18 @@ from bench.cases import (
     world_cases,
 )
 from bench.report import (
+    MODEL_STORE,
     add_run_args,
-    config_from_args,
     jsonable,
     machine_info,
     nanmean,
     plot_lines,
-    write_csv,
-    write_json,
+    write_results,
 )
 from service.solvers.dispatch import DispatchPolicy
 
 __all__ = ["METHODS", "QUICK", "Config", "main", "run"]
 
-MODEL_STORE = Path(__file__).resolve().parents[1] / "model_store"
 # Method name -> (solver, the policy's large solver: the portfolio's first stage).
 METHODS: dict[str, tuple[str, str]] = {
     "auto": ("auto", "gnn_vae_refined"),
@@ -310,9 +308,7 @@ def report(results: dict[str, Any], out: Path) -> str:
             overrun_table(rows),
         ]
     )
-    (out / "tables.md").write_text(text + "\n")
-    write_json(out / "results.json", results)
-    write_csv(out / "results.csv", rows)
+    write_results(out, text, results, rows)
     plot_lines(summary, "delay_ratio_mean", "mean delay ratio", out / "anytime.png")
     plot_lines(summary, "ratio_mean", "mean cost ratio", out / "anytime-cost.png")
     return text
@@ -332,9 +328,7 @@ def _parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """CLI entry."""
-    args = _parse_args(argv)
-    cfg = config_from_args(args, Config(), QUICK)
-    return run_cli(args.summarize, cfg.out, lambda: run(cfg), report)
+    return run_cli(_parse_args(argv), Config(), QUICK, run, report)
 
 
 if __name__ == "__main__":

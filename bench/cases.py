@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from bench.report import delay_ratio, fmt, nanmean
+from bench.report import C, config_from_args, delay_ratio, fmt, nanmean
 from service.core.cliques import Cliques, find_cliques
 from service.core.evaluate import Evaluator
 from service.core.path_schemas import PathsRequest
@@ -274,12 +274,17 @@ def add_case_args(p: argparse.ArgumentParser) -> None:
 
 
 def run_cli(
-    summarize_only: bool,
-    out: Path,
-    run: Callable[[], dict[str, Any]],
+    args: argparse.Namespace,
+    full: C,
+    quick: C,
+    run: Callable[[C], dict[str, Any]],
     report: Callable[[dict[str, Any], Path], str],
 ) -> int:
-    """Run (or, with ``summarize_only``, re-read ``out/results.json``), report, print."""
-    results = json.loads((out / "results.json").read_text()) if summarize_only else run()
+    """A sweep benchmark's command line: the quick (``--quick``) or full config with every
+    flag given (:func:`bench.report.config_from_args`), run (or, with ``--summarize``,
+    re-read from ``out/results.json``), reported, printed."""
+    cfg = config_from_args(args, full, quick)
+    out = cfg.out  # type: ignore[attr-defined]  (every benchmark's Config has one)
+    results = json.loads((out / "results.json").read_text()) if args.summarize else run(cfg)
     print(report(results, out))
     return 0

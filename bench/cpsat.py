@@ -50,7 +50,6 @@ from bench.cases import (
 from bench.cases import summarize as summarize_rows
 from bench.report import (
     add_run_args,
-    config_from_args,
     fmt,
     jsonable,
     machine_info,
@@ -464,9 +463,7 @@ def _parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """CLI entry."""
-    args = _parse_args(argv)
-    cfg = config_from_args(args, Config(), QUICK)
-    return run_cli(args.summarize, cfg.out, lambda: run(cfg), report)
+    return run_cli(_parse_args(argv), Config(), QUICK, run, report)
 
 
 if __name__ == "__main__":

@@ -18,6 +18,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 __all__ = [
+    "MODEL_STORE",
     "PERCENTILES",
     "JsonCache",
     "config_from_args",
@@ -33,9 +34,12 @@ __all__ = [
     "summarize_solves",
     "write_csv",
     "write_json",
+    "write_results",
 ]
 
 C = TypeVar("C")  # a benchmark's frozen Config dataclass
+
+MODEL_STORE = Path(__file__).resolve().parents[1] / "model_store"  # the shipped models
 
 # Percentiles reported for solve times. With few problems per group p95 interpolates
 # between the largest times (numpy's default, "linear"), so read it with the group size.
@@ -231,6 +235,16 @@ def write_csv(path: Path, rows: Sequence[dict[str, Any]]) -> None:
         writer.writerows(rows)
 
 
+def write_results(
+    out: Path, text: str, results: dict[str, Any], rows: Sequence[dict[str, Any]]
+) -> None:
+    """A run's files under ``out``: its tables (``tables.md``), everything it recorded
+    (``results.json``) and its rows (``results.csv``)."""
+    (out / "tables.md").write_text(text + "\n")
+    write_json(out / "results.json", results)
+    write_csv(out / "results.csv", rows)
+
+
 def plot_solve_times(summary: Sequence[dict[str, Any]], time_limit_s: float, path: Path) -> None:
     """Solve-time p50 and p95 against robot count, one panel per objective (log scale).
 
@@ -311,8 +325,10 @@ def plot_lines(
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import NullFormatter
 
     panels = list(dict.fromkeys(s[panel] for s in summary))
+    ticks = sorted({s[x] for s in summary})
     cols = min(5, len(panels))
     nrows = -(-len(panels) // cols)
     fig, axes = plt.subplots(
@@ -329,6 +345,8 @@ def plot_lines(
         count = str(n[0]) if n[0] == n[-1] else f"{n[0]}-{n[-1]}"
         ax.set_title(f"{name} (n = {count})", fontsize="medium")
         ax.set_xscale("log")
+        ax.set_xticks(ticks, [f"{t:g}" for t in ticks])  # the values run, not powers of ten
+        ax.xaxis.set_minor_formatter(NullFormatter())
         ax.grid(True, which="both", alpha=0.3)
     for ax in axes.ravel()[len(panels) :]:
         ax.set_visible(False)
