@@ -25,7 +25,14 @@ from safetensors.torch import load_file, save_file
 
 from service.learning.model import GnnVae, GnnVaeConfig
 
-__all__ = ["ModelLoadError", "StoredModel", "load_all", "load_model", "save_model"]
+__all__ = [
+    "ModelLoadError",
+    "StoredModel",
+    "load_all",
+    "load_model",
+    "load_model_dir",
+    "save_model",
+]
 
 MANIFEST = "manifest.json"
 WEIGHTS = "model.safetensors"
@@ -109,6 +116,19 @@ def load_model(root: Path, objective: str, version: str | None = None) -> Stored
         raise ModelLoadError(f"{objective}: {type(exc).__name__}: {exc}") from exc
     model.eval()
     return StoredModel(objective, str(version), model, metadata)
+
+
+def load_model_dir(folder: Path) -> StoredModel:
+    """Load the model stored in ``folder``, a store's ``<root>/<objective>/<version>``.
+
+    For commands that name one model rather than a store and an objective (fine-tuning
+    from it, benchmarking it beside the shipped one).
+
+    Raises:
+        ModelLoadError: as :func:`load_model`.
+    """
+    folder = folder.resolve()
+    return load_model(folder.parent.parent, folder.parent.name, folder.name)
 
 
 def load_all(
