@@ -3,7 +3,9 @@
 Each problem keeps its skeleton tensors and its top-L targets for one
 objective; every epoch draws one target per problem uniformly, so over epochs
 the model sees the whole distribution of best assignments (the VAE's job is to
-represent that distribution, not a single optimum).
+represent that distribution, not a single optimum). A :class:`TargetFilter`
+drops targets by the quality their labeller proved: large problems' labels are
+the best known answer with CP-SAT's relative gap, not proven optima.
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ from service.core.problem import Problem, problem_from_request
 from service.core.schemas import Objective, ScheduleRequest
 from service.learning.features import GraphTensors, assignment_edge_features, graph_tensors
 
-__all__ = ["Example", "examples_from_records", "to_data"]
+__all__ = ["KEEP_ALL", "Example", "TargetFilter", "examples_from_records", "target_gap", "to_data"]
 
 
 @dataclass(eq=False)
@@ -47,20 +49,58 @@ class Example:
         return Evaluator(self.problem)
 
 
+def target_gap(target: dict[str, Any]) -> float | None:
+    """A stored target's relative gap to the best bound: 0 when proven optimal, the labeller's
+    ``gap`` otherwise, None when unknown (no bound found, or a dataset from before gaps were
+    recorded, whose unproven targets carry none)."""
+    return 0.0 if target["optimal"] else target.get("gap")
+
+
+@dataclass(frozen=True)
+class TargetFilter:
+    """Which stored targets training keeps, by the gap their labeller proved.
+
+    ``max_gap``: drop targets whose relative gap exceeds it (None: any gap);
+    ``proven_only``: drop targets whose gap is unknown (kept by default: such a label is
+    still the best answer its labeller found, only nothing bounds how far from optimal).
+    With ``max_gap=0`` and ``proven_only`` only proven optima remain.
+
+    Example: ``TargetFilter(max_gap=0.05)`` keeps proven optima, labels within 5 % of
+    their bound, and labels of unknown gap.
+    """
+
+    max_gap: float | None = None
+    proven_only: bool = False
+
+    def keeps(self, target: dict[str, Any]) -> bool:
+        """Whether training uses ``target``."""
+        gap = target_gap(target)
+        if gap is None:
+            return not self.proven_only
+        return self.max_gap is None or gap <= self.max_gap
+
+
+KEEP_ALL = TargetFilter()  # every target: what training did before targets had gaps
+
+
 def _bits(text: str) -> np.ndarray:
     return np.frombuffer(text.encode(), dtype=np.uint8) == ord("1")
 
 
 def examples_from_records(
-    records: Iterable[dict[str, Any]], objective: Objective, max_targets: int | None = None
+    records: Iterable[dict[str, Any]],
+    objective: Objective,
+    max_targets: int | None = None,
+    keep: TargetFilter = KEEP_ALL,
 ) -> list[Example]:
-    """Examples of every record that has at least one proven target for ``objective``.
+    """Examples of every record with a target for ``objective`` that ``keep`` keeps.
 
-    Each keeps its ``max_targets`` best targets (all the record has, if None).
+    Each keeps its ``max_targets`` best such targets (all, if None); ``opt_cost`` is the
+    best kept target's cost.
     """
     out = []
     for rec in records:
-        targets = rec["targets"][objective][:max_targets]
+        targets = [t for t in rec["targets"][objective] if keep.keeps(t)][:max_targets]
         if not targets:
             continue
         request = ScheduleRequest.model_validate({**rec["request"], "objective": objective})

@@ -14,6 +14,16 @@ The best epoch by mean normalized gap (cost - opt) / time span is kept; training
 stops early after ``--patience`` epochs without improvement. A checkpoint
 (state dicts only, loaded with ``weights_only=True``) is written every epoch
 and picked up again by the same command (a checkpoint left by other flags is refused, not mixed in).
+
+Fine-tuning: ``--init model_store/avg_completion/v4`` starts from that model's
+config and weights (loaded as the service loads models: safetensors, checksum
+checked) instead of random ones; the model flags may then be left out (given,
+they must match). ``--max-gap G`` trains only on targets whose recorded relative
+gap to CP-SAT's bound is at most G (proven optima have 0), ``--proven-only`` also
+drops targets of unknown gap (:class:`service.learning.dataset.TargetFilter`);
+validation problems keep every target. The result is saved as ``--version`` and,
+as every trained model, becomes the store's default: train candidates into their
+own ``--store`` and compare them with ``python -m bench.generalization --candidate``.
 """
 
 from __future__ import annotations
@@ -33,10 +43,16 @@ from tqdm import tqdm
 
 from service.core.schemas import OBJECTIVES
 from service.learning.data import iter_problems, load_manifest
-from service.learning.dataset import Example, examples_from_records, to_data
+from service.learning.dataset import (
+    KEEP_ALL,
+    Example,
+    TargetFilter,
+    examples_from_records,
+    to_data,
+)
 from service.learning.infer import sample_best
 from service.learning.model import GnnVae, GnnVaeConfig, chain_ranks
-from service.learning.store import save_model
+from service.learning.store import ModelLoadError, StoredModel, load_model_dir, save_model
 
 __all__ = ["TrainConfig", "loss_terms", "train", "validate"]
 
@@ -121,6 +137,25 @@ def _epoch(
     return sums
 
 
+def init_record(init: StoredModel) -> dict[str, str]:
+    """How a run names the model it started from: its name and its weights' SHA-256."""
+    return {"name": init.name, "sha256": init.metadata["sha256"]}
+
+
+def initial_model(model_cfg: GnnVaeConfig, init: StoredModel | None) -> GnnVae:
+    """A model of ``model_cfg``: randomly initialized, or ``init``'s weights (fine-tuning).
+
+    Raises:
+        SystemExit: ``init``'s config is not ``model_cfg``.
+    """
+    model = GnnVae(model_cfg)
+    if init is not None:
+        if init.model.config != model_cfg:
+            raise SystemExit(f"--init {init.name} has config {init.model.config}, not {model_cfg}")
+        model.load_state_dict(init.model.state_dict(), strict=True)
+    return model
+
+
 def train(
     data: list[Path],
     objective: str,
@@ -129,21 +164,32 @@ def train(
     cfg: TrainConfig,
     n_train: int | None,
     n_val: int,
+    init: StoredModel | None = None,
+    keep: TargetFilter = KEEP_ALL,
 ) -> dict[str, Any]:
-    """Train (or resume) and return the best epoch's validation figures and state."""
+    """Train (or resume) and return the best epoch's validation figures and state.
+
+    ``init``: the model to start from (None: random weights); ``keep``: which targets of
+    the training problems to train on (validation problems keep all of theirs).
+    """
     torch.manual_seed(cfg.seed)
     train_ex, val_ex = [], []
     for path in data:  # the last n_val problems of every dataset are held out
         records = list(iter_problems(path, None if n_train is None else n_train + n_val))
-        train_ex += examples_from_records(records[:-n_val], objective, cfg.targets)
+        train_ex += examples_from_records(records[:-n_val], objective, cfg.targets, keep)
         val_ex += examples_from_records(records[-n_val:], objective)
-    model = GnnVae(model_cfg)
+    model = initial_model(model_cfg, init)
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
     run_dir.mkdir(parents=True, exist_ok=True)
     ckpt_path = run_dir / "checkpoint.pt"
     # What a checkpoint must share with the command resuming it (the stopping rules may change).
     learning = {k: v for k, v in asdict(cfg).items() if k not in ("epochs", "patience")}
     setup = {"model": asdict(model_cfg), "train": learning, "data": [str(d) for d in data]}
+    # Named only when used, so that checkpoints from before these options still resume.
+    if init is not None:
+        setup["init"] = init_record(init)
+    if keep != KEEP_ALL:
+        setup["target_filter"] = asdict(keep)
     state: dict[str, Any] = {
         "setup": setup,
         "epoch": 0,
@@ -185,8 +231,8 @@ def train(
     return {"model": model, "state": state}
 
 
-def main(argv: list[str] | None = None) -> None:
-    """CLI entry: train one objective and write it to the model store."""
+def _parser() -> argparse.ArgumentParser:
+    """The training flags; the model's (``--hidden`` ...) and the optimizer's from their configs."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument(
         "--data", type=Path, nargs="+", required=True, help="dataset folders (trained on together)"
@@ -200,15 +246,45 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--train-problems", type=int, default=None)
     p.add_argument("--val", type=int, default=300)
     p.add_argument("--threads", type=int, default=None, help="torch threads (default: torch's)")
-    for f, v in asdict(GnnVaeConfig()).items():
-        p.add_argument(f"--{f.replace('_', '-')}", type=int, default=v)
+    p.add_argument("--init", type=Path, help="a stored model's folder to start from (fine-tune)")
+    p.add_argument("--max-gap", type=float, help="drop targets of a larger relative gap")
+    p.add_argument("--proven-only", action="store_true", help="drop targets of unknown gap")
+    for f, v in asdict(GnnVaeConfig()).items():  # default None: --init's, else the config's
+        p.add_argument(f"--{f.replace('_', '-')}", type=int, help=f"default {v}")
     for f, v in asdict(TrainConfig()).items():
         p.add_argument(f"--{f.replace('_', '-')}", type=type(v), default=v)
+    return p
+
+
+def _model_setup(
+    p: argparse.ArgumentParser, args: argparse.Namespace
+) -> tuple[GnnVaeConfig, StoredModel | None]:
+    """The model config and the model to start from: ``--init``'s (whose config the model
+    flags given must match), else the flags' over the defaults."""
+    given = {k: v for k in asdict(GnnVaeConfig()) if (v := getattr(args, k)) is not None}
+    if args.init is None:
+        return GnnVaeConfig(**given), None
+    try:
+        init = load_model_dir(args.init)
+    except ModelLoadError as exc:
+        p.error(f"--init: {exc}")
+    differ = {k: v for k, v in given.items() if getattr(init.model.config, k) != v}
+    if differ:
+        p.error(f"--init {init.name} fixes the model's config; {differ} differ from it")
+    if (args.store / args.objective / args.version).resolve() == args.init.resolve():
+        p.error(f"--init {args.init}: saving as --version {args.version} would overwrite it")
+    return init.model.config, init
+
+
+def main(argv: list[str] | None = None) -> None:
+    """CLI entry: train one objective and write it to the model store."""
+    p = _parser()
     args = p.parse_args(argv)
     if args.threads:
         torch.set_num_threads(args.threads)
-    model_cfg = GnnVaeConfig(**{k: getattr(args, k) for k in asdict(GnnVaeConfig())})
+    model_cfg, init = _model_setup(p, args)
     cfg = TrainConfig(**{k: getattr(args, k) for k in asdict(TrainConfig())})
+    keep = TargetFilter(args.max_gap, args.proven_only)
     result = train(
         args.data,
         args.objective,
@@ -217,6 +293,8 @@ def main(argv: list[str] | None = None) -> None:
         cfg,
         args.train_problems,
         args.val,
+        init,
+        keep,
     )
     state = result["state"]
     folder = save_model(
@@ -231,8 +309,10 @@ def main(argv: list[str] | None = None) -> None:
             ],
             "train_problems": state["n_train"],
             "val_problems": state["n_val"],
+            "init": None if init is None else init_record(init),
             "training": {
                 **asdict(cfg),
+                "target_filter": asdict(keep),
                 "best_epoch": state["best_epoch"],
                 "epochs_run": state["epoch"],
             },
