@@ -15,8 +15,11 @@ from __future__ import annotations
 import gc
 import threading
 import time
+from collections import deque
 from collections.abc import Iterator
 from contextlib import contextmanager
+
+import numpy as np
 
 from service.core.assignment import Assignments
 from service.core.cliques import Cliques, find_cliques
@@ -31,9 +34,16 @@ from service.core.schemas import (
     ScheduleResponse,
     SolverName,
 )
-from service.solvers.dispatch import DispatchPolicy, solve_problem
+from service.solvers.dispatch import DispatchPolicy, render_reserve, solve_problem
 
 __all__ = ["Rescheduler", "collection_deferred"]
+
+# The solver of a re-schedule stops early enough for the slowest of the last TAILS
+# calls' checking and rendering (more precisely their 90th percentile) to fit the budget:
+# that work grows with the machine's load, and a fleet's loop re-schedules one graph
+# many times, so it is measured rather than modelled alone (render_reserve is the floor).
+TAILS = 20
+TAIL_QUANTILE = 0.9
 
 _gc_lock = threading.Lock()
 _gc_depth = 0  # calls inside collection_deferred, all threads
@@ -79,6 +89,8 @@ class Rescheduler:
         self.cliques: Cliques = find_cliques(self.problem)
         self.decoder = Decoder(self.problem, self.cliques)
         self.orientation = OrientationGraph(self.problem, self.cliques)
+        # Seconds from the solver's planned stop to each recent call's return.
+        self.tails: deque[float] = deque(maxlen=TAILS)
         # Only the objective and options are kept of the request: its tens of thousands of
         # models would make every full garbage collection of the process walk them
         # (measured: a 0.5 s pause every ~11 re-schedules at 250 robots).
@@ -124,7 +136,8 @@ class Rescheduler:
             update={"solver": solver, "time_limit_s": time_limit_s}
         )
         request = self.request.model_copy(update={"options": options})
-        return solve_problem(
+        reserve = self.reserve(residual)
+        answer = solve_problem(
             residual,
             request,
             self.policy,
@@ -133,4 +146,15 @@ class Rescheduler:
             cliques=self.cliques,
             decoder=self.decoder.for_problem(residual),
             orientation=self.orientation.for_problem(residual),
+            reserve_s=reserve,
         )
+        self.tails.append(time.monotonic() - (deadline - reserve))
+        return answer
+
+    def reserve(self, residual: Problem) -> float:
+        """Seconds the solver leaves before the deadline: the recent calls' measured tails
+        (their TAIL_QUANTILE), never less than the model of the work (render_reserve)."""
+        floor = render_reserve(residual)
+        if not self.tails:
+            return floor
+        return max(floor, float(np.quantile(np.fromiter(self.tails, float), TAIL_QUANTILE)))

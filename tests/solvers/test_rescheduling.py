@@ -18,7 +18,7 @@ from service.core.problem import Problem
 from service.core.progress import previous_from_wire, progress_from_wire, residual_problem
 from service.core.schemas import PreviousConflictIn, ProgressIn, ScheduleRequest
 from service.learning.generate import stitched_problem
-from service.solvers.dispatch import DispatchPolicy, dispatch
+from service.solvers.dispatch import DispatchPolicy, dispatch, render_reserve
 from service.solvers.rescheduling import Rescheduler, collection_deferred
 
 POLICY = DispatchPolicy()
@@ -158,3 +158,18 @@ def test_a_reschedule_leaves_the_collector_as_it_was() -> None:
     assert gc.isenabled()
     rescheduler.solve(previous, ProgressIn.model_validate(progress), time_limit_s=0.2)
     assert gc.isenabled()
+
+
+def test_the_reserve_follows_the_measured_tails() -> None:
+    """The solver stops early enough for recent calls' checking and rendering, and never
+    later than the model of that work says."""
+    _, rescheduler, previous, progress = _case(1, "avg_completion")
+    floor = render_reserve(rescheduler.problem)
+    assert rescheduler.reserve(rescheduler.problem) == floor
+    rescheduler.tails.extend([floor / 2] * 20)
+    assert rescheduler.reserve(rescheduler.problem) == floor
+    rescheduler.tails.extend([0.05] * 18 + [0.2] * 2)
+    assert rescheduler.reserve(rescheduler.problem) == pytest.approx(0.05 + 0.1 * 0.15, rel=1e-9)
+    rescheduler.tails.clear()
+    rescheduler.solve(previous, ProgressIn.model_validate(progress), time_limit_s=0.1)
+    assert len(rescheduler.tails) == 1 and rescheduler.tails[0] < 0.1
