@@ -57,6 +57,7 @@ __all__ = [
     "DispatchPolicy",
     "InvalidAnswerError",
     "dispatch",
+    "render_reserve",
     "solve_problem",
 ]
 
@@ -89,6 +90,7 @@ class DispatchPolicy:
 
     default_time_limit_s: float = 5.0
     exact_max_conflicts: int = 60
+    exact_stage_max_conflicts: int = 10_000
     large_solver: str = "gnn_vae_refined"
     exact_workers: int = 1
     exact_deterministic: bool = False
@@ -128,6 +130,7 @@ def solve_problem(
     cliques: Cliques | None = None,
     decoder: Decoder | None = None,
     orientation: OrientationGraph | None = None,
+    reserve_s: float | None = None,
 ) -> ScheduleResponse:
     """Solve a validated ``problem`` with ``request``'s objective and options.
 
@@ -138,6 +141,8 @@ def solve_problem(
             conflict graph and densities, so a re-schedule reuses its base problem's).
         decoder, orientation: likewise, already built for this problem (e.g. by
             ``for_problem`` from the base problem's).
+        reserve_s: seconds before the deadline at which the solver stops, for checking
+            and rendering its answer (default :func:`render_reserve`, a model of that work).
     """
     opts = request.options
     ctx = SolveContext(
@@ -146,13 +151,14 @@ def solve_problem(
         time_limit_s=max(
             0.0,
             _time_left(opts.time_limit_s or policy.default_time_limit_s, deadline)
-            - _render_reserve(problem),
+            - (render_reserve(problem) if reserve_s is None else reserve_s),
         ),
         seed=opts.seed,
         samples=opts.samples,
         workers=policy.exact_workers,
         models=policy.models,
         exact_max_conflicts=policy.exact_max_conflicts,
+        exact_stage_max_conflicts=policy.exact_stage_max_conflicts,
         first_stage=policy.large_solver,
         exact_deterministic=policy.exact_deterministic,
     )
@@ -211,7 +217,7 @@ def _check_realized_density(problem: Problem, cliques: Cliques) -> None:
         )
 
 
-def _render_reserve(problem: Problem) -> float:
+def render_reserve(problem: Problem) -> float:
     """Seconds kept after the solve for checking, evaluating and rendering its answer."""
     return RENDER_S_PER_ITEM * (problem.n_conflicts + problem.n_nodes) + RENDER_S_MIN
 
