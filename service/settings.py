@@ -48,6 +48,11 @@ class Settings(BaseSettings):
     # Conflict density, not robot count, makes CP-SAT slow: measured (docs/benchmarks.md)
     # it proves 25 robots x 2 conflicts (50) in < 0.5 s but not 25 x 4 (100) in 10 s.
     exact_max_conflicts: int = Field(default=60, ge=0)
+    # ``auto`` skips its CP-SAT stage above this many conflicts and gives the first stage
+    # (then tabu search) the whole budget: measured (docs/benchmarks.md, "Anytime auto"),
+    # CP-SAT improved no 250-robot warehouse (12,000-23,000 conflicts) in 10 s, and
+    # the 70 % it took there made auto worse with 10 s than with 5 s.
+    exact_stage_max_conflicts: int = Field(default=10_000, ge=0)
     large_solver: str = "gnn_vae_refined"
     # Where the learned models live (manifest.json + <objective>/<version>/); a missing
     # or corrupt model degrades its objective to the exact solver, then FCFS.

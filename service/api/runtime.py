@@ -161,6 +161,7 @@ def dispatch_policy(settings: Settings) -> DispatchPolicy:
     return DispatchPolicy(
         default_time_limit_s=settings.default_time_limit_s,
         exact_max_conflicts=settings.exact_max_conflicts,
+        exact_stage_max_conflicts=settings.exact_stage_max_conflicts,
         large_solver=settings.large_solver,
         exact_workers=settings.exact_workers,
         exact_deterministic=settings.exact_deterministic,

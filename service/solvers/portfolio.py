@@ -13,8 +13,9 @@ comes first, improving in stages:
    budget; it proves optimality where it can (``solver.optimal`` is true only
    then) and never returns worse than its hint (the cheaper is kept, by the one
    evaluator). It is skipped when building its model alone would not fit in
-   what is left (~120 us per conflict); the first stage then gets the whole budget,
-   and tabu search polishes its answer with whatever the first stage leaves.
+   what is left (~120 us per conflict), and above ``exact_stage_max_conflicts``
+   (where it was measured to improve nothing within seconds); the first stage then
+   gets the whole budget, and tabu search polishes its answer with what it leaves.
 
 Small problems go straight to stage 3 (CP-SAT proves them in milliseconds).
 Robots that share no conflict, directly or through others, form independent
@@ -91,7 +92,8 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
     if problem.n_conflicts == 0:
         return replace(best, optimal=True, detail="no conflict")
     cost = _cost(ctx, best.assignment)
-    build_s = 2 * BUILD_S_PER_CONFLICT * problem.n_conflicts  # CP-SAT: build, search as long
+    too_large = problem.n_conflicts > ctx.exact_stage_max_conflicts  # for CP-SAT to help
+    build_s = np.inf if too_large else 2 * BUILD_S_PER_CONFLICT * problem.n_conflicts
     if problem.n_conflicts > ctx.exact_max_conflicts:
         first = "tabu" if ctx.warm is not None else ctx.first_stage
         left = deadline - time.monotonic()
@@ -103,11 +105,16 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
             stages.append(first)
     left = deadline - time.monotonic()
     if left <= build_s:
-        if left > 0 and problem.n_conflicts > ctx.exact_max_conflicts:
+        if left > 0 and (too_large or problem.n_conflicts > ctx.exact_max_conflicts):
             polished, polished_cost, _ = tabu_search(ctx, best.assignment, budget_s=left)
             if polished_cost < cost:  # the large solver stopped early (its own 1 s cap)
                 best, stages = replace(best, assignment=polished), [*stages, "tabu"]
-        return replace(best, optimal=False, detail=_detail(stages, "no time for CP-SAT"))
+        verdict = (
+            f"no CP-SAT stage above {ctx.exact_stage_max_conflicts} conflicts"
+            if too_large
+            else "no time for CP-SAT"
+        )
+        return replace(best, optimal=False, detail=_detail(stages, verdict))
     improved, verdict = improve(ctx, best, left)
     return replace(improved, detail=_detail(stages, verdict))
 

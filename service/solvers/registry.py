@@ -48,6 +48,8 @@ class SolveContext:
     # first (the policy's large solver), then CP-SAT hinted with its answer.
     exact_max_conflicts: int = 60
     first_stage: str = "gnn_vae_refined"
+    # ... and no CP-SAT stage at all above this many (it improves nothing there in seconds).
+    exact_stage_max_conflicts: int = 10_000
     # CP-SAT limited in deterministic time too (exact.solve(deterministic=True)), so that
     # the ``exact`` solver's answer is the same for the same seed even when it is cut.
     exact_deterministic: bool = False

@@ -122,3 +122,20 @@ def test_auto_uses_and_honours_its_budget(name: str) -> None:
     assert answer.checks.acyclic and answer.checks.density
     if not answer.solver.optimal:
         assert elapsed >= 0.9  # an unproven answer used the budget
+
+
+def test_auto_runs_no_cp_sat_stage_above_its_cap(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Above exact_stage_max_conflicts the first stage and tabu get the budget, CP-SAT none."""
+    import service.solvers.portfolio as portfolio
+
+    def no_cp_sat(*args: Any, **kwargs: Any) -> Any:
+        raise AssertionError("CP-SAT stage ran above the cap")
+
+    monkeypatch.setattr(portfolio, "improve", no_cp_sat)
+    line = json.loads((DATA / "wh_25.jsonl").read_text().splitlines()[0])
+    body = {**line["request"], "options": {"solver": "auto", "time_limit_s": 0.5}}
+    policy = DispatchPolicy(exact_max_conflicts=0, exact_stage_max_conflicts=10)
+    answer = dispatch(ScheduleRequest.model_validate(body), policy)
+    assert answer.solver.name == "auto" and not answer.solver.optimal
+    assert "no CP-SAT stage above 10 conflicts" in answer.solver.detail
+    assert answer.cost >= line["ref_cost"] * (1 - 1e-9)
