@@ -12,7 +12,7 @@ the shards. Kinds (``--kind``):
   ``--kinds`` / ``--hold-out`` choose the world kinds, ``--robots`` the range),
   labelled by the exact portfolio with each label's gap
   (:mod:`service.datagen.labels`); records add ``"world": {"kind", "robots",
-  "seed", "redraws"}``.
+  "seed", "redraws", "drawn"}`` (drawn: the kind's per-seed parameters).
 
 Problem ``i`` is generated from ``SeedSequence([seed, i])`` and solved by CP-SAT
 with one worker and a fixed seed, so a dataset is reproducible from its

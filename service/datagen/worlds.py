@@ -6,8 +6,8 @@ configured range) and a world seed. A world the service would refuse (its fixed
 paths leave no collision-free order, or its cliques exceed the work budget) or
 whose robots never interfere is redrawn: the next count and world seed of the
 same stream, the kind kept, so the kinds stay as evenly drawn as configured and
-only the sizes a kind cannot produce shift. The draw is deterministic, and the
-record says how many draws it took.
+only the sizes a kind cannot produce shift. The draw is deterministic; the
+record says how many draws it took, and which parameters the kind drew.
 """
 
 from __future__ import annotations
@@ -25,9 +25,9 @@ from service.core.schemas import ScheduleRequest
 from service.datagen.config import ScenarioConfig
 from service.geometry.graph import GeometrySettings
 from service.motion.plan import derive
-from service.scenarios import generate
+from service.scenarios import KINDS, World, generate
 
-__all__ = ["DrawnWorld", "draw_world", "robot_count"]
+__all__ = ["DrawnWorld", "derived_request", "draw_world", "robot_count"]
 
 
 @dataclass(frozen=True)
@@ -39,14 +39,18 @@ class DrawnWorld:
     robots: int  # robots of the world (the graph holds those that interfere)
     seed: int  # the world's seed: generate(kind, robots, seed) rebuilds it
     redraws: int  # worlds refused or conflict-free before this one
+    drawn: dict[str, Any]  # the kind's parameters drawn for this seed (style, walls, ...)
 
     def world_record(self) -> dict[str, Any]:
-        """What a dataset record keeps of the world, for splitting evaluations by kind."""
+        """What a dataset record keeps of the world, for splitting evaluations by kind (and
+        by drawn parameter: wh_parked and wh_mixed draw every warehouse style, floor_mixed
+        may have a wall with gaps, so a held-out style can be filtered out of them)."""
         return {
             "kind": self.kind,
             "robots": self.robots,
             "seed": self.seed,
             "redraws": self.redraws,
+            "drawn": self.drawn,
         }
 
 
@@ -55,10 +59,9 @@ def robot_count(rng: np.random.Generator, low: int, high: int) -> int:
     return min(high, int(math.exp(rng.uniform(math.log(low), math.log(high + 1)))))
 
 
-def derived_request(kind: str, robots: int, seed: int) -> ScheduleRequest | None:
-    """The graph-form request of a world, as the service derives it; None when the
+def derived_request(world: World) -> ScheduleRequest | None:
+    """The graph-form request of ``world``, as the service derives it; None when the
     service would refuse the world or no two of its robots interfere."""
-    world = generate(kind, robots, seed)
     paths = PathsRequest.model_validate(world.to_request())
     try:
         request = derive(paths, GeometrySettings()).to_request(paths)
@@ -83,7 +86,9 @@ def draw_world(cfg: ScenarioConfig, seed: int) -> DrawnWorld:
     for redraws in range(cfg.max_redraws):
         robots = robot_count(rng, *cfg.robots)
         world_seed = int(rng.integers(2**31))
-        request = derived_request(kind, robots, world_seed)
+        world = generate(kind, robots, world_seed)
+        request = derived_request(world)
         if request is not None:
-            return DrawnWorld(request, kind, robots, world_seed, redraws)
+            drawn = {name: world.params[name] for name in KINDS[kind].choices}
+            return DrawnWorld(request, kind, robots, world_seed, redraws, drawn)
     raise RuntimeError(f"{kind}: no usable world in {cfg.max_redraws} draws (seed {seed})")

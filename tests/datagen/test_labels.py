@@ -16,6 +16,7 @@ from service.core.schemas import ScheduleRequest
 from service.datagen.labels import HINT_ABOVE_CONFLICTS, contexts, portfolio_hint, portfolio_labels
 from service.datagen.worlds import derived_request
 from service.learning.data import iter_problems
+from service.scenarios import generate
 
 GAP_TOL = 1e-6  # CP-SAT's bound is on integer-scaled times (TIME_DIGITS significant digits)
 
@@ -52,7 +53,7 @@ def test_proof_and_gap_agree_and_targets_come_best_first(tiny_dataset: Path) -> 
 
 
 def _context(kind: str, robots: int, seed: int, objective: str, time_limit_s: float):
-    problem = problem_from_request(derived_request(kind, robots, seed))
+    problem = problem_from_request(derived_request(generate(kind, robots, seed)))
     return contexts(problem, [objective], time_limit_s)[objective]
 
 

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from service.core.problem import problem_from_request
 from service.datagen.config import ScenarioConfig
 from service.datagen.worlds import draw_world, robot_count
-from service.scenarios import KINDS
+from service.scenarios import KINDS, generate
 
 
 @given(
@@ -39,6 +39,9 @@ def test_robot_counts_are_skewed_to_the_small_end() -> None:
 def test_only_configured_kinds_are_drawn(kinds: list[str], seed: int) -> None:
     drawn = draw_world(ScenarioConfig(kinds=tuple(kinds), robots=(5, 8)), seed)
     assert drawn.kind in kinds and 5 <= drawn.robots <= 8
+    assert drawn.drawn.keys() == KINDS[drawn.kind].choices.keys()
+    world = generate(drawn.kind, drawn.robots, drawn.seed)  # the record rebuilds its world
+    assert all(world.params[name] == value for name, value in drawn.drawn.items())
     assert problem_from_request(drawn.request).n_conflicts > 0
 
 
