@@ -42,6 +42,7 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
+import os
 import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, replace
@@ -289,6 +290,7 @@ def model_info(policy: DispatchPolicy, cfg: Config) -> dict[str, Any]:
 def run(cfg: Config, progress: bool = True) -> dict[str, Any]:
     """Derive the worlds, solve the references (cached) and every method; return everything
     that gets written."""
+    machine = {**machine_info(), "load_avg_1min_start": os.getloadavg()[0]}
     worlds, skipped = derive_worlds(cfg, progress)
     if not worlds:
         raise SystemExit(f"no world could be derived: {skipped}")
@@ -309,8 +311,9 @@ def run(cfg: Config, progress: bool = True) -> dict[str, Any]:
         found = [run_method(lb, solver, world, cfg, by_model[m]) for lb, solver, m in methods]
         rows += measured(world.case, [*ref, *found])[len(ref) :]
         problems.append(problem_record(world, ref, found))
+    machine["load_avg_1min_end"] = os.getloadavg()[0]
     return {
-        "machine": machine_info(),
+        "machine": machine,
         "config": jsonable(asdict(cfg)),
         "models": {m or "shipped": model_info(p, cfg) for m, p in by_model.items()},
         "methods": [label for label, _, _ in methods],
@@ -475,14 +478,21 @@ def skipped_table(skipped: Sequence[dict[str, Any]]) -> str:
 
 
 def model_text(results: dict[str, Any]) -> str:
-    """The models compared, and a warning where one was trained on a held-out kind."""
+    """The models compared, the kinds their data held, and where that disagrees with the split:
+    a held-out kind trained on (a warning), a trained-group kind the model never saw."""
     held = set(results["config"]["held_out"])
+    kinds = {r["kind"] for r in results["rows"]}
     lines = []
     for label, info in results["models"].items():
-        leak = sorted(held & set(info["trained_kinds"]))
-        seen = ", ".join(info["trained_kinds"]) or "no scenario kinds"
-        warn = f" **Trained on held-out kinds {leak}: the split does not hold.**" if leak else ""
-        lines.append(f"- {label}: `{info['name']}` (data: {seen}).{warn}")
+        seen = set(info["trained_kinds"])
+        text = (
+            f"- {label}: `{info['name']}` (data: {', '.join(sorted(seen)) or 'no scenario kinds'})"
+        )
+        if leak := sorted(held & seen):
+            text += f". **Trained on held-out kinds {leak}: the split does not hold.**"
+        if seen and (unseen := sorted(kinds - held - seen)):
+            text += f"; in the trained group but not in its data: {', '.join(unseen)}"
+        lines.append(text + ".")
     return "\n".join(lines)
 
 
@@ -504,7 +514,9 @@ def report(results: dict[str, Any], out: Path) -> str:
             f"held out: {', '.join(cfg['held_out'])}; the model alone with "
             f"{cfg['samples']} samples, every method with {cfg['time_limit_s']:g} s; "
             f"reference: the best of `auto` and `tabu` with {cfg['ref_budget_s']:g} s each "
-            "and of every method below.",
+            "and of every method below. 1-minute load average "
+            f"{m['load_avg_1min_start']:.1f} at the start, {m['load_avg_1min_end']:.1f} at the "
+            "end (the machine is shared: latency rises with the load).",
             "Models:\n\n" + model_text(results),
             "Cells: mean cost ratio / mean delay ratio. By group:",
             side_by_side(by_group, ("group", "robots"), methods),

@@ -9,7 +9,16 @@ from pathlib import Path
 import pytest
 
 import bench.generalization as generalization
-from bench.generalization import HELD, QUICK, TRAINED, Config, _parse_args, main, target_table
+from bench.generalization import (
+    HELD,
+    QUICK,
+    TRAINED,
+    Config,
+    _parse_args,
+    main,
+    model_text,
+    target_table,
+)
 from bench.report import config_from_args
 
 SHIPPED_MODEL = Path(__file__).resolve().parents[2] / "model_store" / "avg_completion" / "v4"
@@ -83,3 +92,16 @@ def test_targets_need_every_figure_and_never_worse_than_fcfs() -> None:
     assert "missed: FCFS |" in text and "| 1 (0) |" in text and "0.900 (>= 0.8)" in text
     slow = [{**r, "e2e_s": 0.2} for r in rows]
     assert "missed: time, FCFS |" in target_table(slow, ["gnn_vae"])
+
+
+def test_models_say_where_their_data_disagrees_with_the_split() -> None:
+    rows = [{"kind": k} for k in ("wh_two_way", "wh_mixed", "wh_two_lane")]
+    models = {
+        "shipped": {"name": "gnn_vae/avg_completion/v4", "trained_kinds": []},
+        "candidate": {"name": "c", "trained_kinds": ["wh_two_lane", "wh_two_way"]},
+    }
+    text = model_text({"config": {"held_out": ["wh_two_lane"]}, "rows": rows, "models": models})
+    shipped, candidate = text.splitlines()
+    assert shipped.endswith("(data: no scenario kinds).")
+    assert "Trained on held-out kinds ['wh_two_lane']" in candidate
+    assert candidate.endswith("in the trained group but not in its data: wh_mixed.")
