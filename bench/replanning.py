@@ -48,8 +48,7 @@ from bench.report import (
     jsonable,
     machine_info,
     markdown_table,
-    write_csv,
-    write_json,
+    write_results,
 )
 from service.core.evaluate import Evaluator
 from service.core.problem import ProblemError
@@ -193,7 +192,8 @@ def run(cfg: Config, progress: bool = True) -> dict[str, Any]:
         raise SystemExit(f"models failed to load: {errors}")
     policy = DispatchPolicy(default_time_limit_s=cfg.time_limit_s, models=models)
     machine = {**machine_info(), "load_avg_1min_start": os.getloadavg()[0]}
-    measure_world("wh_two_way", 10, replace(cfg, states=1), policy, tqdm(total=0, disable=True))  # JIT
+    warm_up = replace(cfg, states=1)  # JIT compiling and first calls are not measured
+    measure_world("wh_two_way", 10, warm_up, policy, tqdm(total=0, disable=True))
     rows: list[dict[str, Any]] = []
     refused: list[dict[str, Any]] = []
     with tqdm(total=0, desc="re-schedules", unit="call", disable=not progress) as bar:
@@ -311,9 +311,7 @@ def report(results: dict[str, Any], out: Path) -> str:
             "residual problem's delay-free cost; best found: share of calls at the best.",
         ]
     )
-    (out / "tables.md").write_text(text + "\n")
-    write_json(out / "results.json", results)
-    write_csv(out / "results.csv", rows)
+    write_results(out, text, results, rows)
     plot(summary, out / "replanning.png")
     return text
 
