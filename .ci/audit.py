@@ -23,10 +23,18 @@ from typing import Any
 
 TIMEOUT_S = 600
 
+# Findings accepted, with the reason (pip-audit --ignore-vuln; both ids of one finding).
+# Ray (optional extra `distributed`, data generation only): CVE-2023-48022, disputed by
+# its maintainers, is the unauthenticated job API of a Ray cluster's dashboard, which is
+# meant to run on a trusted network; there is no fixed version. The plain `ray` package
+# installs no dashboard, and docs/gnn_vae.md says a cluster must not be exposed.
+ACCEPTED = ("GHSA-6wgj-66m2-xxp2", "CVE-2023-48022")
+
 
 def run_pip_audit(report: Path) -> None:
     """Audit the installed environment into ``report`` (JSON); its exit code is not used."""
     command = [sys.executable, "-m", "pip_audit", "--progress-spinner", "off"]
+    command += [arg for vuln in ACCEPTED for arg in ("--ignore-vuln", vuln)]
     subprocess.run([*command, "--format", "json", "--output", str(report)], timeout=TIMEOUT_S)
 
 

@@ -80,14 +80,11 @@ from bench.report import (
 from service.core.cliques import TooManyCliques
 from service.core.schemas import OBJECTIVES
 from service.learning.store import METADATA, ModelLoadError, StoredModel, load_model, load_model_dir
-from service.scenarios import KINDS
+from service.scenarios import HELD_OUT, KINDS
 from service.solvers.dispatch import DispatchPolicy, dispatch
 
-__all__ = ["HELD_OUT", "QUICK", "Config", "main", "run"]
+__all__ = ["QUICK", "Config", "main", "run"]
 
-# Kinds held out of training by default: one warehouse style and one floor type
-# (issue 13: "train on some warehouse styles and floor types, test on the others").
-HELD_OUT = ("wh_two_lane", "floor_passages")
 TRAINED, HELD = "trained", "held-out"
 MODEL_SOLVERS = ("gnn_vae", "gnn_vae_refined")  # run once per model
 CANDIDATE = "candidate"  # the label of the candidate model's methods

@@ -7,11 +7,12 @@
 
 from service.scenarios.fleet import FleetParams
 from service.scenarios.floor import FloorParams, floor
-from service.scenarios.kinds import KINDS, Kind, generate
+from service.scenarios.kinds import HELD_OUT, KINDS, Kind, generate
 from service.scenarios.warehouse import STYLES, WarehouseParams, warehouse
 from service.scenarios.world import World
 
 __all__ = [
+    "HELD_OUT",
     "KINDS",
     "STYLES",
     "FleetParams",

@@ -19,7 +19,7 @@ from service.scenarios.floor import floor
 from service.scenarios.warehouse import STYLES, warehouse
 from service.scenarios.world import World
 
-__all__ = ["KINDS", "Kind", "generate"]
+__all__ = ["HELD_OUT", "KINDS", "Kind", "generate"]
 
 # Stream id mixed into the seed for the per-kind parameter draws, so they never
 # reuse the draws of the world itself.
@@ -94,6 +94,13 @@ KINDS: dict[str, Kind] = {
         "obstacle floor with mixed robot sizes and piecewise speeds",
     ),
 }
+
+
+# Kinds that training data leaves out and generalization is measured on: one warehouse
+# style, the style-mixing warehouse kind (wh_mixed draws every style, the held-out one
+# too) and one floor type (issue 13: "train on some warehouse styles and floor types,
+# test on the others").
+HELD_OUT = ("wh_two_lane", "wh_mixed", "floor_passages")
 
 
 def generate(kind: str, n_robots: int, seed: int) -> World:
