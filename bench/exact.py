@@ -48,12 +48,13 @@ from bench.report import (
 )
 from service.core.decode import Decoder
 from service.core.evaluate import Evaluator
-from service.core.schemas import OBJECTIVES
+from service.core.schemas import OBJECTIVES, ScheduleRequest
+from service.solvers.dispatch import DispatchPolicy, dispatch
 from service.solvers.exact import solve
 from service.solvers.fcfs import fcfs
 from service.solvers.registry import SolveContext
 
-__all__ = ["Config", "QUICK", "main", "run_evaluator", "run_exact"]
+__all__ = ["Config", "QUICK", "main", "run_auto", "run_evaluator", "run_exact"]
 
 DEFAULT_OUT = Path("bench/out")
 # Family tag of the evaluator graph's seed (the problem sets use 1 and 2).
@@ -81,6 +82,9 @@ class Config:
     repeats: int = 30
     seed: int = 0
 
+
+# The service's routing without learned models (small problems never reach them).
+AUTO_POLICY = DispatchPolicy()
 
 # A smoke run: the same code paths on fewer and smaller problems (< 1 min on 2 cores).
 QUICK = Config(
@@ -135,9 +139,41 @@ def _problem_sets(cfg: Config, progress: bool) -> list[BenchProblem]:
     return problems
 
 
-def run_exact(cfg: Config, progress: bool = True) -> list[dict[str, Any]]:
+def _auto_one(bp: BenchProblem, objective: str, cfg: Config) -> dict[str, Any]:
+    """One small problem through ``auto`` end to end, as the service answers it: the
+    request validated from its JSON form, the portfolio, the check and the answer."""
+    body = {**bp.request, "objective": objective}
+    body["options"] = {"solver": "auto", "time_limit_s": cfg.time_limit_s, "seed": cfg.seed}
+    start = time.perf_counter()
+    answer = dispatch(ScheduleRequest.model_validate(body), AUTO_POLICY)
+    elapsed = time.perf_counter() - start
+    return {
+        "family": "auto",
+        "robots": bp.robots,
+        "conflicts_per_robot": None,
+        "index": bp.index,
+        "objective": objective,
+        "n_conflicts": bp.problem.n_conflicts,
+        "time_s": elapsed,
+        "found": True,
+        "optimal": answer.solver.optimal,
+    }
+
+
+def run_auto(cfg: Config, problems: Sequence[BenchProblem], progress: bool) -> list[dict]:
+    """``auto`` end to end on the small problems (issue 11: proven optima, p95 <= 50 ms)."""
+    small = [bp for bp in problems if bp.family == "small"]
+    todo = [(bp, objective) for bp in small for objective in cfg.objectives]
+    return [
+        _auto_one(bp, objective, cfg)
+        for bp, objective in tqdm(todo, desc="auto end to end", disable=not progress)
+    ]
+
+
+def run_exact(
+    cfg: Config, problems: Sequence[BenchProblem], progress: bool = True
+) -> list[dict[str, Any]]:
     """Solve every problem of the run for every objective -> one record per solve."""
-    problems = _problem_sets(cfg, progress)
     runs = []
     with tqdm(total=len(problems) * len(cfg.objectives), desc="exact", disable=not progress) as bar:
         for bp in problems:
@@ -267,6 +303,28 @@ def _exact_tables(summary: Sequence[dict[str, Any]], cfg: Config) -> str:
             )
         )
     return "\n\n".join(parts)
+
+
+def _auto_table(summary: Sequence[dict[str, Any]], cfg: Config) -> str:
+    """``auto`` end to end on the small problems, times in ms, against issue 11's 50 ms."""
+    head = (
+        f"auto end to end (validate, portfolio, check, answer), small problems "
+        f"({cfg.small_count} per robot count, time limit {cfg.time_limit_s:g} s), times in ms; "
+        "issue 11: proven optimal, p95 <= 50 ms"
+    )
+    rows = [
+        [
+            r["objective"],
+            r["robots"],
+            _ms(r["p50_s"]),
+            _ms(r["p95_s"]),
+            _ms(r["max_s"]),
+            f"{r['optimal']:.0%}",
+        ]
+        for r in summary
+    ]
+    table = format_table(["objective", "robots", "p50", "p95", "max", "optimal"], rows)
+    return head + "\n" + table
 
 
 def _evaluator_table(ev: dict[str, Any]) -> str:
@@ -407,13 +465,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
 
     started = time.perf_counter()
-    runs = run_exact(cfg, progress)
+    problems = _problem_sets(cfg, progress)
+    runs = run_exact(cfg, problems, progress)
     summary = summarize_solves(runs)
+    auto_runs = run_auto(cfg, problems, progress)
+    auto_summary = summarize_solves(auto_runs)
     ev = run_evaluator(cfg, progress)
     total_s = time.perf_counter() - started
 
     print()
     print(_exact_tables(summary, cfg))
+    print()
+    print(_auto_table(auto_summary, cfg))
     print()
     print(_evaluator_table(ev))
     print(f"\nTotal benchmark time: {total_s:.0f} s", flush=True)
@@ -426,6 +489,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             "machine": machine,
             "total_s": total_s,
             "exact": {"summary": summary, "runs": runs},
+            "auto": {"summary": auto_summary, "runs": auto_runs},
             "evaluator": ev,
         },
     )

@@ -110,6 +110,12 @@ def test_tiny_run_prints_tables_and_writes_results(tmp_path, capsys) -> None:
         ("small", 3),
         ("stitched", 10),
     ]
+    auto = results["auto"]["runs"]  # the small problems only, through auto end to end
+    assert [(r["robots"], r["objective"]) for r in auto] == [(2, "max_completion")] * 2 + [
+        (3, "max_completion")
+    ] * 2
+    assert all(r["optimal"] and 0 < r["time_s"] < 5 for r in auto)
+    assert "auto end to end" in out
     ev = results["evaluator"]
     assert ev["robots"] == 12
     assert [(t["step"], t["batch"]) for t in ev["timings"]] == [
