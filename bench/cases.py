@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -279,12 +280,19 @@ def run_cli(
     quick: C,
     run: Callable[[C], dict[str, Any]],
     report: Callable[[dict[str, Any], Path], str],
+    failed: Callable[[dict[str, Any]], str | None] = lambda results: None,
+    skip: Sequence[str] = ("quick", "summarize"),
 ) -> int:
     """A sweep benchmark's command line: the quick (``--quick``) or full config with every
-    flag given (:func:`bench.report.config_from_args`), run (or, with ``--summarize``,
-    re-read from ``out/results.json``), reported, printed."""
-    cfg = config_from_args(args, full, quick)
+    flag given (:func:`bench.report.config_from_args`; flags in ``skip`` are not config
+    fields), run (or, with ``--summarize``, re-read from ``out/results.json``), reported,
+    printed. Exit status 1, with ``failed``'s message, when the results fail the run."""
+    cfg = config_from_args(args, full, quick, skip)
     out = cfg.out  # type: ignore[attr-defined]  (every benchmark's Config has one)
     results = json.loads((out / "results.json").read_text()) if args.summarize else run(cfg)
     print(report(results, out))
+    message = failed(results)
+    if message:
+        print(f"\nFAILED: {message}", file=sys.stderr)
+        return 1
     return 0

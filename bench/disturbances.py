@@ -30,9 +30,7 @@ from __future__ import annotations
 
 import argparse
 import itertools
-import json
 import os
-import sys
 import time
 import zlib
 from collections.abc import Iterable, Sequence
@@ -43,10 +41,10 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from bench.cases import run_cli
 from bench.paths import _service_changes as service_changes  # belongs in bench.report
 from bench.report import (
     add_run_args,
-    config_from_args,
     fmt,
     jsonable,
     machine_info,
@@ -644,20 +642,16 @@ def _parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     return p.parse_args(argv)
 
 
+def failed(results: dict[str, Any]) -> str | None:
+    """Why the run failed: runs of b or c that collided or deadlocked, or refusals."""
+    bad = failures(results["rows"]) + refusals(results["rows"])
+    return f"{len(bad)} collided or deadlocked run(s) of b or c, or refusals" if bad else None
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """CLI entry: 1 when a run of b or c collided or deadlocked, or a re-schedule was refused."""
-    args = _parse_args(argv)
-    cfg = config_from_args(args, Config(), QUICK, skip=("quick", "summarize", "cache"))
-    results = json.loads((cfg.out / "results.json").read_text()) if args.summarize else run(cfg)
-    print(report(results, cfg.out))
-    bad = failures(results["rows"]) + refusals(results["rows"])
-    if bad:
-        print(
-            f"\nFAILED: {len(bad)} collided or deadlocked run(s) of b or c, or refusals",
-            file=sys.stderr,
-        )
-        return 1
-    return 0
+    skip = ("quick", "summarize", "cache")
+    return run_cli(_parse_args(argv), Config(), QUICK, run, report, failed, skip)
 
 
 if __name__ == "__main__":

@@ -20,9 +20,7 @@ delay-free cost). Under ``--out``: ``tables.md``, ``results.json`` /
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import sys
 import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, replace
@@ -32,6 +30,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from bench.cases import run_cli
 from bench.disturbances import (
     MODEL_STORE,
     WAREHOUSES,
@@ -43,7 +42,6 @@ from bench.disturbances import (
 from bench.disturbances import Config as DisturbanceConfig
 from bench.report import (
     add_run_args,
-    config_from_args,
     delay_ratio,
     jsonable,
     machine_info,
@@ -328,16 +326,15 @@ def _parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     return p.parse_args(argv)
 
 
+def refused(results: dict[str, Any]) -> str | None:
+    """Why the run failed: a world the geometry refused (else None)."""
+    return f"refused worlds {results['refused']}" if results["refused"] else None
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """CLI entry: 1 when a world was refused."""
-    args = _parse_args(argv)
-    cfg = config_from_args(args, Config(), QUICK, skip=("quick", "summarize", "cache"))
-    results = json.loads((cfg.out / "results.json").read_text()) if args.summarize else run(cfg)
-    print(report(results, cfg.out))
-    if results["refused"]:
-        print(f"\nFAILED: refused worlds {results['refused']}", file=sys.stderr)
-        return 1
-    return 0
+    skip = ("quick", "summarize", "cache")
+    return run_cli(_parse_args(argv), Config(), QUICK, run, report, refused, skip)
 
 
 if __name__ == "__main__":

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from bench.replanning import main, spread, summarize
+from bench.replanning import main, refused, spread, summarize
 
 
 def test_spread_picks_evenly_and_keeps_short_runs_whole() -> None:
@@ -39,3 +39,8 @@ def test_quick_run_end_to_end(tmp_path: Path) -> None:
     assert all(r["cost"] >= r["best"] - 1e-9 and r["cost_ratio"] <= 1 + 1e-12 for r in rows)
     assert all(r["free"] <= r["cost"] + 1e-9 for r in rows)
     assert main([*argv, "--summarize"]) == 0  # re-renders from the raw results
+
+
+def test_a_refused_world_fails_the_run() -> None:
+    assert refused({"refused": []}) is None
+    assert "wh_two_way 250" in str(refused({"refused": [{"kind": "wh_two_way 250"}]}))
