@@ -141,15 +141,10 @@ def _incidences(problem: Problem, groups: list[list[int]]) -> tuple[np.ndarray, 
     """The conflicts inside each clique of ``groups`` (node lists), in CSR layout.
 
     Vectorized per clique size: every node pair of a clique is a conflict, looked up
-    by its key ``min * V + max`` among the sorted conflict keys.
+    by :meth:`Problem.conflict_between`.
 
     Shapes: -> edge (E,) int sorted within each clique, start (Q+1,) int.
     """
-    n_nodes = problem.node_density.size
-    lo = np.minimum(problem.conf_a, problem.conf_b).astype(np.int64)
-    hi = np.maximum(problem.conf_a, problem.conf_b).astype(np.int64)
-    order = np.argsort(lo * n_nodes + hi)
-    sorted_keys = (lo * n_nodes + hi)[order]
     sizes = np.array([len(m) for m in groups], dtype=np.int64)
     start = np.concatenate([[0], np.cumsum(sizes * (sizes - 1) // 2)]).astype(np.int64)
     edge = np.empty(start[-1], dtype=np.int64)
@@ -157,8 +152,7 @@ def _incidences(problem: Problem, groups: list[list[int]]) -> tuple[np.ndarray, 
         which = np.flatnonzero(sizes == size)
         members = np.array([groups[q] for q in which], dtype=np.int64)  # (Q_s, size)
         i, j = np.triu_indices(size, 1)
-        u, v = members[:, i], members[:, j]
-        keys = np.minimum(u, v) * n_nodes + np.maximum(u, v)  # (Q_s, size (size - 1) / 2)
-        inside = np.sort(order[np.searchsorted(sorted_keys, keys)], axis=1)
+        inside = problem.conflict_between(members[:, i], members[:, j])  # (Q_s, pairs)
+        inside = np.sort(inside, axis=1)
         edge[start[which][:, None] + np.arange(i.size)] = inside
     return edge, start

@@ -145,19 +145,19 @@ class Problem:
     @cached_property
     def _pair_keys(self) -> tuple[np.ndarray, np.ndarray]:
         """Sorted (M,) keys min*N + max of every conflict's node pair, and (M,) their order."""
-        a, b = self.conf_a, self.conf_b
+        a, b = self.conf_a.astype(np.int64), self.conf_b.astype(np.int64)
         keys = np.minimum(a, b) * self.n_nodes + np.maximum(a, b)  # (M,) unique per pair
         order = np.argsort(keys)
         return keys[order], order
 
     def conflict_between(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """(K,) the conflict joining nodes ``u`` and ``v`` (K,) in either order, or -1
-        (also where a node is -1)."""
+        """The conflict joining nodes ``u`` and ``v`` (same shape, any) in either order,
+        or -1 (also where a node is -1)."""
         if self.n_conflicts == 0:
-            return np.full(u.size, -1, dtype=np.int64)
+            return np.full(u.shape, -1, dtype=np.int64)
         keys, order = self._pair_keys
-        wanted = np.minimum(u, v) * self.n_nodes + np.maximum(u, v)  # (K,)
-        pos = np.minimum(np.searchsorted(keys, wanted), keys.size - 1)  # (K,)
+        wanted = np.minimum(u, v) * self.n_nodes + np.maximum(u, v)  # like u
+        pos = np.minimum(np.searchsorted(keys, wanted), keys.size - 1)  # like u
         hit = (u >= 0) & (v >= 0) & (keys[pos] == wanted)
         return np.where(hit, order[pos], -1)
 
