@@ -98,6 +98,16 @@ class Moment:
     progress: ProgressIn
 
 
+def as_disturbances(cfg: Config) -> DisturbanceConfig:
+    """The disturbance benchmark's settings this run plans, draws and re-schedules with."""
+    return replace(
+        DisturbanceConfig(),
+        base_seed=cfg.base_seed,
+        period_s=cfg.period_s,
+        time_limit_s=cfg.time_limit_s,
+    )
+
+
 def capture(planned: Any, cfg: Config, rescheduler: Rescheduler) -> list[Moment]:
     """Every re-schedule's input over one disturbed run of ``planned`` (mode c)."""
     moments: list[Moment] = []
@@ -108,7 +118,7 @@ def capture(planned: Any, cfg: Config, rescheduler: Rescheduler) -> list[Moment]
             previous, progress, time_limit_s=cfg.capture_budget_s, solver=cfg.solver
         )
 
-    disturbance_cfg = replace(DisturbanceConfig(), base_seed=cfg.base_seed, period_s=cfg.period_s)
+    disturbance_cfg = as_disturbances(cfg)
     seed = draw_seed(disturbance_cfg, planned.kind, planned.robots, cfg.profile, 0)
     disturbances = draw(planned, cfg.profile, seed)
     execute_rescheduled(
@@ -140,8 +150,7 @@ def measure_world(
     kind: str, robots: int, cfg: Config, policy: DispatchPolicy, bar: tqdm
 ) -> list[dict[str, Any]]:
     """Re-schedule the captured moments of one world with every budget: one row per call."""
-    disturbance_cfg = replace(DisturbanceConfig(), time_limit_s=cfg.time_limit_s)
-    planned = plan_world(kind, robots, disturbance_cfg, policy)
+    planned = plan_world(kind, robots, as_disturbances(cfg), policy)
     rescheduler = Rescheduler(planned.request, policy)
     moments = capture(planned, cfg, rescheduler)
     picked = spread(moments, cfg.states)
