@@ -52,7 +52,8 @@ def _pair_min_gap(
     ta: np.ndarray, pa: np.ndarray, tb: np.ndarray, pb: np.ndarray, radii: float
 ) -> tuple[float, float]:
     """Least centre distance minus ``radii`` of two waypoint lists over their common time,
-    and when. (inf, nan) if they are never present together."""
+    and when. (inf, nan) if they are never present together. Scalar arithmetic only: the
+    kernel runs for every nearby pair of every answer."""
     t0, t1 = max(ta[0], tb[0]), min(ta[-1], tb[-1])
     if t0 > t1:
         return np.inf, np.nan
@@ -63,14 +64,15 @@ def _pair_min_gap(
         na = ta[ia + 1] if ia + 1 < ta.size else np.inf
         nb = tb[ib + 1] if ib + 1 < tb.size else np.inf
         u = min(na, nb, t1)
-        qa0, qa1 = _at(ta, pa, ia, t), _at(ta, pa, ia, u)
-        qb0, qb1 = _at(tb, pb, ib, t), _at(tb, pb, ib, u)
-        d0 = qa0 - qb0  # relative position, linear from d0 (at t) to d1 (at u)
-        d1 = qa1 - qb1
-        dd = d1 - d0
-        denom = dd[0] * dd[0] + dd[1] * dd[1]
-        f = 0.0 if denom <= 0.0 else min(1.0, max(0.0, -(d0[0] * dd[0] + d0[1] * dd[1]) / denom))
-        gap = np.sqrt((d0[0] + f * dd[0]) ** 2 + (d0[1] + f * dd[1]) ** 2) - radii
+        ax0, ay0 = _at(ta, pa, ia, t)
+        ax1, ay1 = _at(ta, pa, ia, u)
+        bx0, by0 = _at(tb, pb, ib, t)
+        bx1, by1 = _at(tb, pb, ib, u)
+        dx, dy = ax0 - bx0, ay0 - by0  # relative position, linear from (dx, dy) at t ...
+        ex, ey = ax1 - bx1 - dx, ay1 - by1 - dy  # ... by (ex, ey) until u
+        denom = ex * ex + ey * ey
+        f = 0.0 if denom <= 0.0 else min(1.0, max(0.0, -(dx * ex + dy * ey) / denom))
+        gap = np.sqrt((dx + f * ex) ** 2 + (dy + f * ey) ** 2) - radii
         if gap < best:
             best, when = gap, t + f * (u - t)
         if u >= t1:
@@ -83,12 +85,12 @@ def _pair_min_gap(
 
 
 @numba.njit(cache=True, nogil=True)
-def _at(ts: np.ndarray, ps: np.ndarray, k: int, t: float) -> np.ndarray:
-    """Position at time t on the waypoint interval k (clamped to its ends)."""
+def _at(ts: np.ndarray, ps: np.ndarray, k: int, t: float) -> tuple[float, float]:
+    """Position (x, y) at time t on the waypoint interval k (clamped to its ends)."""
     if k + 1 >= ts.size or ts[k + 1] <= ts[k]:
-        return ps[k].copy()
+        return ps[k, 0], ps[k, 1]
     f = min(1.0, max(0.0, (t - ts[k]) / (ts[k + 1] - ts[k])))
-    return ps[k] + f * (ps[k + 1] - ps[k])
+    return ps[k, 0] + f * (ps[k + 1, 0] - ps[k, 0]), ps[k, 1] + f * (ps[k + 1, 1] - ps[k, 1])
 
 
 def check_clearance(trajectories: Sequence[Trajectory]) -> Clearance:
