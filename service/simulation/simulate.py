@@ -38,21 +38,37 @@ ARC_TOL = 1e-6
 def plan_to_wire(paths: Sequence[RobotPath], plan: DependencyPlan) -> list[Dependency]:
     """Per robot, its wait points in path order and whom it waits for (the latest point each).
 
-    Plain dicts (the wire types are TypedDicts): a 250-robot plan has ~10^4 entries.
+    Plain dicts (the wire types are TypedDicts): a 250-robot plan has ~10^4 entries, so
+    the grouping is done in numpy and Python only builds the dicts.
     """
     order = np.lexsort((plan.waitee, plan.wait_s, plan.waiter))  # by robot, point, waitee
-    waiter, wait_s = plan.waiter[order].tolist(), plan.wait_s[order].tolist()
-    waitee, until_s = plan.waitee[order].tolist(), plan.until_s[order].tolist()
+    waiter, wait_s, waitee = plan.waiter[order], plan.wait_s[order], plan.waitee[order]
+    # One entry per (robot, point, waitee): the latest point of that waitee.
+    entry = _run_starts(waiter, wait_s, waitee)  # (E,) first row of each entry
+    until = np.maximum.reduceat(plan.until_s[order], entry) if entry.size else entry  # (E,)
+    point = _run_starts(waiter[entry], wait_s[entry])  # (P,) first entry of each point
+    ids = [p.id for p in paths]
+    after: list[WaitAfter] = [
+        {"robot": ids[w], "s": u}
+        for w, u in zip(waitee[entry].tolist(), until.tolist(), strict=True)
+    ]
+    bounds = np.append(point, entry.size).tolist()
     waits: list[list[WaitPoint]] = [[] for _ in paths]
-    k = 0
-    while k < len(order):
-        r, s, after = waiter[k], wait_s[k], {}
-        while k < len(order) and waiter[k] == r and wait_s[k] == s:
-            after[waitee[k]] = max(after.get(waitee[k], 0.0), until_s[k])
-            k += 1
-        entries = [WaitAfter(robot=paths[w].id, s=u) for w, u in after.items()]
-        waits[r].append(WaitPoint(s=s, after=entries))
-    return [Dependency(robot=path.id, waits=w) for path, w in zip(paths, waits, strict=True)]
+    heads = entry[point]  # (P,) first row of each point
+    for k, (r, s) in enumerate(zip(waiter[heads].tolist(), wait_s[heads].tolist(), strict=True)):
+        waits[r].append({"s": s, "after": after[bounds[k] : bounds[k + 1]]})
+    return [{"robot": rid, "waits": w} for rid, w in zip(ids, waits, strict=True)]
+
+
+def _run_starts(*keys: np.ndarray) -> np.ndarray:
+    """(G,) int: where each run of equal rows of the sorted, equally long ``keys`` starts."""
+    if keys[0].size == 0:
+        return np.zeros(0, dtype=np.int64)
+    change = np.zeros(keys[0].size, dtype=bool)
+    change[0] = True
+    for key in keys:
+        change[1:] |= key[1:] != key[:-1]
+    return np.flatnonzero(change)
 
 
 def plan_from_wire(paths: Sequence[RobotPath], deps: Sequence[Dependency]) -> DependencyPlan:
