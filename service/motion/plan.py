@@ -205,26 +205,31 @@ def _render(
     paths, run = graph.paths, executed.run
     ids = graph.node_ids()
     planned = _time_points(graph)
-    realized = [_departures(run, r, planned[r], state) for r in range(len(paths))]
-    costs = realized_costs(run.completion, planned, realized)
-    schedule = []
+    node_bounds = np.searchsorted(graph.node_robot, np.arange(len(paths) + 1)).tolist()
+    realized, schedule = [], []
     for r, path in enumerate(paths):
-        nodes = np.flatnonzero(graph.node_robot == r)
-        enter, exit_ = (
-            _departures(run, r, path.time_at(graph.node_span[nodes, k]), state) for k in (0, 1)
-        )
+        lo, hi = node_bounds[r], node_bounds[r + 1]  # robot r's nodes, in path order
+        n_points = planned[r].size
+        # (P + 2n,) one lookup for the time points and the node ends
+        span_times = path.time_at(graph.node_span[lo:hi].T.ravel())
+        left = _departures(run, r, np.concatenate([planned[r], span_times]), state)
+        realized.append(left[:n_points])
+        enter, exit_ = left[n_points : n_points + hi - lo], left[n_points + hi - lo :]
         schedule.append(
-            RobotScheduleOut(
+            RobotScheduleOut.model_construct(
                 robot=path.id,
                 completion=float(run.completion[r]),
                 delay=float(run.completion[r] - path.finish_time),
                 nodes=[
-                    NodeTimesOut(id=ids[v], enter=float(a), exit=float(b))
-                    for v, a, b in zip(nodes.tolist(), enter.tolist(), exit_.tolist(), strict=True)
+                    NodeTimesOut.model_construct(id=ids[v], enter=a, exit=b)
+                    for v, a, b in zip(range(lo, hi), enter.tolist(), exit_.tolist(), strict=True)
                 ],
             )
         )
-    return PathsScheduleResponse(
+    costs = realized_costs(run.completion, planned, realized)
+    # Constructed without re-validation: every field comes from checked arrays and the
+    # request's ids (tests validate rendered answers against the models).
+    return PathsScheduleResponse.model_construct(
         objective=request.objective,
         cost=costs[request.objective],
         costs=CostsOut(**costs),
@@ -241,9 +246,9 @@ def _render(
         graph=graph_request,
         node_spans=graph.node_spans(),
         trajectories=[
-            TrajectoryOut(
+            TrajectoryOut.model_construct(
                 robot=path.id,
-                points=np.column_stack([tr.t, tr.xy]).tolist(),
+                points=list(map(tuple, np.column_stack([tr.t, tr.xy]).tolist())),  # (t, x, y)
             )
             for path, tr in zip(paths, executed.trajectories, strict=True)
         ],
@@ -302,12 +307,14 @@ def _time_points(graph: CoordinationGraph) -> list[np.ndarray]:
 def _assignment(graph: CoordinationGraph, decision: Decision) -> list[AssignmentOut]:
     """The executed decision in the wire format, in the graph's conflict order."""
     ids = graph.node_ids()
-    out = []
-    for m, (a, b) in enumerate(graph.conf_node.tolist()):
-        first, second = (a, b) if decision.a_first[m] else (b, a)
-        kind = "following" if decision.following[m] else "exclusive"
-        out.append({"from": ids[first], "to": ids[second], "type": kind})
-    return out
+    a, b = graph.conf_node[:, 0], graph.conf_node[:, 1]  # (M,) each
+    first = np.where(decision.a_first, a, b).tolist()
+    second = np.where(decision.a_first, b, a).tolist()
+    kinds = ["following" if f else "exclusive" for f in decision.following.tolist()]
+    return [
+        {"from": ids[u], "to": ids[v], "type": k}
+        for u, v, k in zip(first, second, kinds, strict=True)
+    ]
 
 
 def _solver_info(

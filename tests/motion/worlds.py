@@ -13,6 +13,7 @@ paths form (issue 10) independently of the service's own clearance check:
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from typing import Any
 
@@ -173,6 +174,7 @@ def _assert_speeds(path: RobotPath, t: np.ndarray, arcs: np.ndarray) -> None:
 
 def assert_motion_valid(req: PathsRequest, out: PathsScheduleResponse) -> None:
     """The acceptance property of one answer, checked from the wire answer alone."""
+    _assert_rendered_is_valid(out)
     assert out.checks.collision_free
     assert out.checks.acyclic and out.checks.density and out.checks.forced
     assert out.solver.detail != FALLBACK_DETAIL, "the solver's own plan did not execute"
@@ -193,6 +195,15 @@ def assert_motion_valid(req: PathsRequest, out: PathsScheduleResponse) -> None:
         assert abs(arcs[-1] - path.length) < 1e-5
         _assert_speeds(path, tr.t, arcs)
     _assert_schedule_describes_trajectories(req, out, trajs)
+
+
+def _assert_rendered_is_valid(out: PathsScheduleResponse) -> None:
+    """The answer, constructed without validation, is what validating its JSON gives, and
+    serializes without a warning (every field already of its declared type)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        body = out.model_dump_json()
+    assert PathsScheduleResponse.model_validate_json(body) == out
 
 
 def _assert_clearance_agrees(
