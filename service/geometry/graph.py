@@ -122,57 +122,67 @@ class CoordinationGraph:
         }
 
     def to_request(self, base: PathsRequest) -> ScheduleRequest | None:
-        """The graph as a graph-form request (objective and options of ``base``); None if empty."""
+        """The graph as a graph-form request (objective and options of ``base``); None if empty.
+
+        Built in bulk (times by one interpolation per robot and side, ids and dicts from
+        Python lists) and validated once: per-conflict interpolation and numpy scalars
+        cost 0.4 s at 23,000 conflicts. Validation (pydantic-core, ~80 ms there) stays:
+        ``model_construct`` measured 2-3x slower than validating the same dicts.
+        """
         if self.node_robot.size == 0:
             return None
-        ids = self.node_ids()
-        robots = []
-        for r in self.robots_in_graph().tolist():
-            path = self.paths[r]
-            nodes = np.flatnonzero(self.node_robot == r)
-            times = path.time_at(self.node_span[nodes])  # (n, 2)
-            robots.append(
-                {
-                    "id": path.id,
-                    "nodes": [
-                        {"id": ids[v], "enter": t0, "exit": t1, "density": int(d)}
-                        for v, (t0, t1), d in zip(
-                            nodes.tolist(), times.tolist(), self.node_density[nodes], strict=True
-                        )
-                    ],
-                    "goal_time": path.finish_time,
-                }
+        ids = self._node_ids
+        node_times = self._times_at(self.node_robot, self.node_span).tolist()  # (V, 2)
+        density = self.node_density.tolist()
+        nodes = [
+            {"id": nid, "enter": t0, "exit": t1, "density": d}
+            for nid, (t0, t1), d in zip(ids, node_times, density, strict=True)
+        ]
+        bounds = np.flatnonzero(np.diff(self.node_robot, prepend=-1, append=-1)).tolist()
+        robots = [
+            {"id": self.paths[r].id, "nodes": nodes[lo:hi], "goal_time": self.paths[r].finish_time}
+            for r, lo, hi in zip(
+                self.node_robot[bounds[:-1]].tolist(), bounds[:-1], bounds[1:], strict=True
             )
-        conflicts = []
-        for m, (a, b) in enumerate(self.conf_node.tolist()):
-            i, j = int(self.node_robot[a]), int(self.node_robot[b])
-            x0, x1, y0, y1 = self.conf_span[m]
-            (ta0, ta1), (tb0, tb1) = (
-                self.paths[i].time_at([x0, x1]),
-                self.paths[j].time_at([y0, y1]),
-            )
-            conflict = {
-                "a": ids[a],
-                "b": ids[b],
-                "a_enter": float(ta0),
-                "a_exit": float(ta1),
-                "b_enter": float(tb0),
-                "b_exit": float(tb1),
-            }
-            if self.forced[m]:
-                conflict["first"] = "a" if self.forced[m] > 0 else "b"
-            conflicts.append(conflict)
+        ]
         return ScheduleRequest.model_validate(
             {
                 "objective": base.objective,
                 "robots": robots,
-                "conflicts": conflicts,
+                "conflicts": self._wire_conflicts(),
                 "density_limits": [
                     {"nodes": [ids[a], ids[b]], "max_robots": 1} for a, b in self.exclusive_pairs()
                 ],
                 "options": base.options.model_dump(),
             }
         )
+
+    def _wire_conflicts(self) -> list[dict[str, str | float]]:
+        """The conflicts as wire dicts: node ids, section times, ``first`` where fixed."""
+        ids = self._node_ids
+        side_robot = self.node_robot[self.conf_node]  # (M, 2)
+        a_times = self._times_at(side_robot[:, 0], self.conf_span[:, :2])  # (M, 2)
+        b_times = self._times_at(side_robot[:, 1], self.conf_span[:, 2:])  # (M, 2)
+        conflicts: list[dict[str, str | float]] = [
+            {"a": ids[a], "b": ids[b], "a_enter": ta0, "a_exit": ta1, "b_enter": tb0, "b_exit": tb1}
+            for (a, b), (ta0, ta1), (tb0, tb1) in zip(
+                self.conf_node.tolist(), a_times.tolist(), b_times.tolist(), strict=True
+            )
+        ]
+        for m in np.flatnonzero(self.forced).tolist():
+            conflicts[m]["first"] = "a" if self.forced[m] > 0 else "b"
+        return conflicts
+
+    def _times_at(self, robot: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """Planned times at arc lengths ``s`` (K, w) of robots ``robot`` (K,): one
+        interpolation per robot (the values :meth:`RobotPath.time_at` gives one by one)."""
+        times = np.empty_like(s)
+        order = np.argsort(robot, kind="stable")
+        cuts = np.flatnonzero(np.diff(robot[order])) + 1
+        for rows in np.split(order, cuts):
+            if rows.size:
+                times[rows] = self.paths[int(robot[rows[0]])].time_at(s[rows])
+        return times
 
     def exclusive_pairs(self) -> list[tuple[int, int]]:
         """Node pairs of the exclusive-only conflicts that node densities alone would not

@@ -19,6 +19,7 @@ from service.core.schemas import ScheduleRequest
 from service.geometry.graph import CoordinationGraph, GeometrySettings, build_graph
 from service.geometry.paths import RobotPath
 from service.motion.plan import coordination_graph
+from service.scenarios.kinds import KINDS, generate
 from tests.motion.worlds import distance_to_path, fleets, paths_of, request, robot
 from tests.reference import density_groups, density_ok, reference_problem
 
@@ -63,10 +64,11 @@ def assert_graph_sound(req: PathsRequest, graph: CoordinationGraph) -> ScheduleR
         assert robot_of.size == 0
         return None
     for m, allowed in enumerate(following_alone_allowed(wire)):
-        cos = _box_cosines(graph, m)
+        cos = np.concatenate(_box_cosines(graph, m))
         if allowed:  # crossings and head-on sections are exclusive
             assert np.any(cos > np.cos(np.radians(30))), f"crossing conflict {m} may follow"
             assert not np.any(cos < -np.cos(np.radians(30))), f"head-on conflict {m} may follow"
+    assert_wire_is_the_graph(graph, wire)
     problem_from_request(wire)  # the contract's cross-field rules accept it
     ScheduleRequest.model_validate(wire.model_dump(mode="json"))  # and so does the wire
     assert [r.id for r in wire.robots] == [graph.paths[r].id for r in graph.robots_in_graph()]
@@ -74,6 +76,34 @@ def assert_graph_sound(req: PathsRequest, graph: CoordinationGraph) -> ScheduleR
         p.id for p in graph.paths
     )
     return wire
+
+
+def assert_wire_is_the_graph(graph: CoordinationGraph, wire: ScheduleRequest) -> None:
+    """The wire graph, built in bulk, says what the graph says, element by element: node
+    and section times are the planned times of their arc lengths (``time_at`` one by one)."""
+    ids, paths = graph.node_ids(), graph.paths
+    nodes = [(r.id, n) for r in wire.robots for n in r.nodes]
+    assert [n.id for _, n in nodes] == ids
+    for v, (rid, node) in enumerate(nodes):
+        path = paths[int(graph.node_robot[v])]
+        assert rid == path.id
+        assert [node.enter, node.exit] == path.time_at(graph.node_span[v]).tolist()
+        assert node.density == graph.node_density[v]
+    assert [r.goal_time for r in wire.robots] == [
+        paths[r].finish_time for r in graph.robots_in_graph().tolist()
+    ]
+    assert len(wire.conflicts) == graph.n_conflicts
+    for m, c in enumerate(wire.conflicts):
+        a, b = graph.conf_node[m].tolist()
+        i, j = graph.node_robot[[a, b]].tolist()
+        x0, x1, y0, y1 = graph.conf_span[m]
+        assert (c.a, c.b) == (ids[a], ids[b])
+        assert [c.a_enter, c.a_exit] == paths[i].time_at([x0, x1]).tolist()
+        assert [c.b_enter, c.b_exit] == paths[j].time_at([y0, y1]).tolist()
+        assert c.first == {1: "a", -1: "b", 0: None}[int(graph.forced[m])]
+    assert [d.nodes for d in wire.density_limits] == [
+        [ids[a], ids[b]] for a, b in graph.exclusive_pairs()
+    ]
 
 
 def _expected_first(graph: CoordinationGraph, m: int) -> int:
@@ -108,14 +138,22 @@ def _heading(path: RobotPath, s: np.ndarray) -> np.ndarray:
     return d / np.linalg.norm(d, axis=1, keepdims=True)
 
 
-def _box_cosines(graph: CoordinationGraph, m: int) -> np.ndarray:
-    """Cosine of the angle between the two robots' headings in each box of conflict m."""
+def _box_cosines(graph: CoordinationGraph, m: int) -> list[np.ndarray]:
+    """Per box of conflict m, the cosines between i's heading on its piece and j's on each
+    path segment that j's stretch runs along (a stretch may turn at j's vertices: the
+    narrow phase merges a piece's stretches on consecutive segments into one box)."""
     lo, hi = graph.box_start[m], graph.box_start[m + 1]
     b = graph.boxes
     i, j = graph.node_robot[graph.conf_node[m]].tolist()
-    ui = _heading(graph.paths[i], (b.x0[lo:hi] + b.x1[lo:hi]) / 2)
-    uj = _heading(graph.paths[j], (b.y0[lo:hi] + b.y1[lo:hi]) / 2)
-    return np.einsum("kd,kd->k", ui, uj)
+    ui = _heading(graph.paths[i], (b.x0[lo:hi] + b.x1[lo:hi]) / 2)  # (K, 2)
+    arc = graph.paths[j].arc
+    cosines = []
+    for u, y0, y1 in zip(ui, b.y0[lo:hi], b.y1[lo:hi], strict=True):
+        inner = arc[(arc > y0 + 1e-9) & (arc < y1 - 1e-9)]  # j's vertices inside the stretch
+        cuts = np.concatenate([[y0], inner, [y1]])
+        uj = _heading(graph.paths[j], (cuts[:-1] + cuts[1:]) / 2)  # (S, 2)
+        cosines.append(uj @ u)
+    return cosines
 
 
 @settings(max_examples=40, deadline=None, derandomize=True)
@@ -127,6 +165,20 @@ def test_random_fleets_give_sound_graphs_or_refuse_by_name(robots: list[dict[str
     except ProblemError as err:
         assert "re-plan" in str(err)
         assert sum(f"'{r['id']}'" in str(err) for r in robots) >= 2
+        return
+    assert_graph_sound(req, graph)
+
+
+@pytest.mark.parametrize("kind", sorted(KINDS))
+@pytest.mark.parametrize("seed", [0, 1])
+def test_scenario_worlds_give_sound_graphs(kind: str, seed: int) -> None:
+    """The generator's worlds (many conflicts, timed and mixed fleets) give sound graphs
+    whose wire form is exactly the graph (or are refused by name)."""
+    req = PathsRequest.model_validate(generate(kind, 25, seed).to_request())
+    try:
+        graph = build_graph(paths_of(req), SETTINGS)
+    except ProblemError as err:
+        assert "re-plan" in str(err)
         return
     assert_graph_sound(req, graph)
 
