@@ -20,14 +20,25 @@ Constraints of the new plan whose waiter is already past its wait point are moot
 
 from __future__ import annotations
 
-import heapq
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numba.typed import List
 
 from service.geometry.paths import RobotPath
 from service.simulation.disturbances import Rate
+from service.simulation.event_loop import (
+    RECORD,
+    Loop,
+    catch_up,
+    clocks_at,
+    push_starts,
+    reach_all,
+    run_until,
+    schedule_all,
+    waypoints,
+)
 
 __all__ = ["DependencyPlan", "Execution", "Run", "State", "execute", "on_clock"]
 
@@ -93,33 +104,44 @@ class Execution:
     ``execute(paths, plan, rates)`` is ``Execution(paths, plan, rates).finish()``.
     Re-scheduling pauses the run (:meth:`advance`), reads the :class:`State`, and
     continues from that state with a new plan (:meth:`replace_plan`); disturbances
-    (``rates``) belong to the world and stay.
+    (``rates``) belong to the world and stay. The event loop itself is compiled
+    (:mod:`.event_loop`); this class loads plans into it and reads results out.
     """
 
     def __init__(
         self, paths: Sequence[RobotPath], plan: DependencyPlan, rates: Sequence[Rate] | None = None
     ):
-        # State lives in Python lists: the event loop reads single entries, where numpy
-        # scalar indexing measured several times slower.
         self.paths = paths
         self.rates = list(rates) if rates is not None else [Rate()] * len(paths)
-        n = len(paths)
         self.now = -np.inf  # wall time the run has been advanced to
-        self.finish_clock = [p.finish_time for p in paths]
-        self.clock = [p.start_time for p in paths]  # progress clock at self.wall
-        self.wall = list(self.clock)
-        self.moving = [False] * n
-        self.started = [False] * n
-        self.done = [False] * n
-        self.version = [0] * n
-        self.target = list(self.clock)  # progress clock of each moving robot's next event
-        self.records: list[list[tuple[float, float]]] = [[] for _ in range(n)]
-        self.completion = [float("nan")] * n
-        self.events: list[tuple[float, int, int, int, float]] = []
-        self.seq = 0
+        start = np.array([p.start_time for p in paths], dtype=np.float64)  # (R,)
+        pieces = np.array([rate.value.size for rate in self.rates], dtype=np.int64)  # (R,)
+        none = DependencyPlan.empty()  # placeholders until the plan is loaded
+        self.loop = Loop(
+            clock=start.copy(),
+            wall=start.copy(),
+            target=start.copy(),
+            finish_clock=np.array([p.finish_time for p in paths], dtype=np.float64),
+            completion=np.full(len(paths), np.nan),
+            moving=np.zeros(len(paths), dtype=bool),
+            started=np.zeros(len(paths), dtype=bool),
+            done=np.zeros(len(paths), dtype=bool),
+            rate_start=np.concatenate([[0], np.cumsum(pieces)]),
+            rate_edge=np.concatenate([np.zeros(0)] + [r.edges for r in self.rates]),
+            rate_value=np.concatenate([np.zeros(0)] + [r.value for r in self.rates]),
+            **_constraints(len(paths), none.waiter, none.wait_s, none.waitee, none.until_s),
+            event_wall=np.zeros(len(paths)),
+            event_clock=np.zeros(len(paths)),
+            event_start=np.zeros(len(paths), dtype=bool),
+            event_seq=np.zeros(len(paths), dtype=np.int64),
+            seq=np.zeros(1, dtype=np.int64),
+            heap=np.zeros(len(paths), dtype=np.int64),
+            heap_size=np.zeros(1, dtype=np.int64),
+            heap_pos=np.full(len(paths), -1, dtype=np.int64),
+            records=List.empty_list(RECORD),
+        )
         self._load(plan)
-        for r, path in enumerate(paths):
-            self._push(path.start_time, r, -1, path.start_time)
+        push_starts(self.loop, np.arange(len(paths)), start, start)
 
     @classmethod
     def resume(
@@ -137,70 +159,59 @@ class Execution:
         others appear at their first point at their start time, or now if that has passed.
         """
         run = cls(paths, DependencyPlan.empty(), rates)
-        run.now, run.events = state.time, []
-        for r, path in enumerate(paths):
-            run.started[r], run.done[r] = bool(state.started[r]), bool(state.done[r])
+        run.now = state.time
+        loop = run.loop
+        loop.heap_size[0], loop.heap_pos[:] = 0, -1  # no starts: robots are where they are
+        loop.started[:], loop.done[:] = state.started, state.done
+        present = state.started | state.done  # (R,)
+        for r in np.flatnonzero(present).tolist():
             if state.done[r]:  # one waypoint at its arrival: gone from then on
-                run.clock[r], run.completion[r] = path.finish_time, float(state.completion[r])
-                run.wall[r] = run.completion[r]
-                run._record(r)
-            elif state.started[r]:
-                run.clock[r], run.wall[r] = float(state.clock[r]), state.time
-                run._record(r)
+                loop.clock[r], loop.wall[r] = loop.finish_clock[r], state.completion[r]
+                loop.completion[r] = state.completion[r]
             else:
-                run.wall[r] = max(path.start_time, state.time)
-                run._push(run.wall[r], r, -1, path.start_time)
+                loop.clock[r], loop.wall[r] = state.clock[r], state.time
+            loop.records.append((r, loop.wall[r], loop.clock[r]))
+        waiting = np.flatnonzero(~present)  # (W,) appear at their start, or now
+        loop.wall[waiting] = np.maximum(loop.clock[waiting], state.time)
+        push_starts(loop, waiting, loop.wall[waiting], loop.clock[waiting])
         run._load(plan)
-        for r in range(len(paths)):
-            if run.started[r]:
-                run._reach(r)
-        for r in range(len(paths)):
-            if run.started[r] and not run.done[r]:
-                run._schedule(r)
+        reach_all(run.loop)
+        schedule_all(run.loop, np.flatnonzero(loop.started & ~loop.done))
         return run
 
     def _load(self, plan: DependencyPlan) -> int:
         """Index ``plan``'s constraints; drop those whose waiter is past its wait point or
         done (moot). Returns how many were dropped."""
-        n = len(self.paths)
+        loop = self.loop
         wait_clock = on_clock(self.paths, plan.waiter, plan.wait_s)  # (D,)
         until_clock = on_clock(self.paths, plan.waitee, plan.until_s)  # (D,)
-        clock, done = np.array(self.clock), np.array(self.done, dtype=bool)  # (R,) each
-        live = (wait_clock >= clock[plan.waiter]) & ~done[plan.waiter]  # (D,)
-        waitee = plan.waitee[live]  # (D',)
-        wait_clock, until_clock = wait_clock[live], until_clock[live]
-        self.satisfied = [False] * waitee.size
-        self.waiter = plan.waiter[live].tolist()
-        # Per waiter, a heap of (wait clock, constraint); its limit is the least unsatisfied.
-        self.blocking: list[list[tuple[float, int]]] = [[] for _ in range(n)]
-        for c, (w, wc) in enumerate(zip(self.waiter, wait_clock.tolist(), strict=True)):
-            self.blocking[w].append((wc, c))
-        for heap in self.blocking:
-            heapq.heapify(heap)
-        # Per waitee, its release thresholds as progress-clock values, sorted.
-        order = np.lexsort((until_clock, waitee))
-        self.release_order = order.tolist()
-        self.release_clock = until_clock[order].tolist()
-        self.release_start = np.searchsorted(waitee[order], np.arange(n + 1)).tolist()
-        self.next_release = self.release_start[:-1]
-        return int(plan.size - waitee.size)
+        live = (wait_clock >= loop.clock[plan.waiter]) & ~loop.done[plan.waiter]  # (D,)
+        self.loop = loop._replace(
+            **_constraints(
+                len(self.paths),
+                plan.waiter[live],
+                wait_clock[live],
+                plan.waitee[live],
+                until_clock[live],
+            )
+        )
+        return int(plan.size - np.count_nonzero(live))
 
     @property
     def finished(self) -> bool:
         """Nothing more can happen: every robot is done or waits for ever (deadlock)."""
-        return not self.events
+        return self.loop.heap_size[0] == 0
 
     def advance(self, until: float) -> State:
         """Run every event up to wall time ``until`` (included) and return the state then."""
-        while self.events and self.events[0][0] <= until:
-            self._pop()
+        run_until(self.loop, until)
         self.now = until
         return State(
             until,
-            np.array([self._clock_at(r, until) for r in range(len(self.paths))]),
-            np.array(self.started, dtype=bool),
-            np.array(self.done, dtype=bool),
-            np.array(self.completion),
+            clocks_at(self.loop, until),
+            self.loop.started.copy(),
+            self.loop.done.copy(),
+            self.loop.completion.copy(),
         )
 
     def replace_plan(self, plan: DependencyPlan) -> int:
@@ -210,127 +221,51 @@ class Execution:
         those whose waitee has already reached its point are satisfied. Returns the
         number of moot constraints.
         """
-        present = [r for r in range(len(self.paths)) if self.started[r] and not self.done[r]]
-        for r in present:  # bring clocks up to now; pending events are rescheduled below
-            self._catch_up(r, self.now)
+        present = np.flatnonzero(self.loop.started & ~self.loop.done)  # (P,)
+        catch_up(self.loop, present, self.now)  # pending events are rescheduled below
         moot = self._load(plan)
-        for r in range(len(self.paths)):
-            if self.started[r]:
-                self._reach(r)
-        for r in present:
-            self._schedule(r)
+        reach_all(self.loop)
+        schedule_all(self.loop, present)
         return moot
 
     def finish(self) -> Run:
         """Run to the end and return what happened."""
-        while self.events:
-            self._pop()
-        return self._result()
-
-    def _pop(self) -> None:
-        wall, _, r, version, clock = heapq.heappop(self.events)
-        if version == -1:
-            self._start(r)
-        elif version == self.version[r]:
-            self._arrive(r, wall, clock)
-
-    def _push(self, wall: float, r: int, version: int, clock: float) -> None:
-        heapq.heappush(self.events, (wall, self.seq, r, version, clock))
-        self.seq += 1
-
-    def _limit_clock(self, r: int) -> float:
-        """Progress clock of robot r's nearest blocking wait point (its finish if none)."""
-        heap = self.blocking[r]
-        while heap and self.satisfied[heap[0][1]]:
-            heapq.heappop(heap)
-        return heap[0][0] if heap else self.finish_clock[r]
-
-    def _schedule(self, r: int) -> None:
-        """Robot r moves from (wall, clock): push its next event, or stop it at its limit."""
-        limit = self._limit_clock(r)
-        if limit <= self.clock[r]:
-            if self.moving[r]:
-                self.moving[r] = False
-                self.version[r] += 1  # a new plan may stop it before its pending event
-                self._record(r)
-            return
-        if not self.moving[r]:
-            self.moving[r] = True
-            self._record(r)
-        target = min(limit, self.finish_clock[r])
-        k = self.next_release[r]
-        if k < self.release_start[r + 1]:
-            target = min(target, self.release_clock[k])
-        self.version[r] += 1
-        self.target[r] = target
-        gain = target - self.clock[r]
-        self._push(self.rates[r].advance(self.wall[r], gain), r, int(self.version[r]), target)
-
-    def _start(self, r: int) -> None:
-        """Robot r appears at its first point at its start time."""
-        self.started[r] = True
-        self._record(r)
-        self._release(r)
-        self._schedule(r)
-
-    def _arrive(self, r: int, wall: float, clock: float) -> None:
-        """Robot r reached progress ``clock`` at ``wall``: release, finish or go on."""
-        self.wall[r], self.clock[r] = wall, clock
-        if clock >= self.finish_clock[r]:
-            self.done[r], self.moving[r] = True, False
-            self.completion[r] = wall
-            self._record(r)
-        self._release(r)
-        if not self.done[r]:
-            self._schedule(r)
-
-    def _reach(self, r: int) -> set[int]:
-        """Satisfy the constraints robot r has now reached; return their waiters."""
-        k, end = self.next_release[r], self.release_start[r + 1]
-        waiters: set[int] = set()
-        while k < end and (self.done[r] or self.release_clock[k] <= self.clock[r]):
-            c = self.release_order[k]
-            self.satisfied[c] = True
-            waiters.add(self.waiter[c])
-            k += 1
-        self.next_release[r] = k
-        return waiters
-
-    def _release(self, r: int) -> None:
-        """Satisfy the constraints robot r has now reached and update their waiters."""
-        for w in sorted(self._reach(r)):
-            self._wake(w, self.wall[r])
-
-    def _clock_at(self, r: int, wall: float) -> float:
-        """Robot r's progress clock at ``wall`` (never past its pending event: rounding of
-        advance/progress)."""
-        if not self.moving[r]:
-            return self.clock[r]
-        return min(self.clock[r] + self.rates[r].progress(self.wall[r], wall), self.target[r])
-
-    def _catch_up(self, r: int, wall: float) -> None:
-        """Bring robot r's clock up to ``wall``."""
-        self.clock[r] = self._clock_at(r, wall)
-        self.wall[r] = wall
-
-    def _wake(self, w: int, wall: float) -> None:
-        """Robot w's limit may have moved on at ``wall``: bring it up to date and reschedule."""
-        if not self.started[w] or self.done[w]:
-            return
-        self._catch_up(w, wall)
-        self._schedule(w)
-
-    def _record(self, r: int) -> None:
-        self.records[r].append((float(self.wall[r]), float(self.clock[r])))
-
-    def _result(self) -> Run:
+        run_until(self.loop, np.inf)
+        times_start = np.concatenate([[0], np.cumsum([p.times.size for p in self.paths])])
+        robot, wall, clock = waypoints(
+            self.loop, np.concatenate([p.times for p in self.paths]), times_start
+        )  # (K,) each, grouped by robot
+        bounds = np.searchsorted(robot, np.arange(len(self.paths) + 1)).tolist()
         walls, clocks = [], []
-        for r, path in enumerate(self.paths):
-            wall, clock = _expand(self.records[r], path, self.rates[r])
-            walls.append(wall)
-            clocks.append(clock)
-        stuck = tuple(r for r, done in enumerate(self.done) if not done)
-        return Run(walls, clocks, np.array(self.completion), stuck)
+        for r in range(len(self.paths)):
+            w, c = _linear_pieces(wall[bounds[r] : bounds[r + 1]], clock[bounds[r] : bounds[r + 1]])
+            walls.append(w)
+            clocks.append(c)
+        stuck = tuple(np.flatnonzero(~self.loop.done).tolist())
+        return Run(walls, clocks, self.loop.completion.copy(), stuck)
+
+
+def _constraints(
+    n: int, waiter: np.ndarray, wait_clock: np.ndarray, waitee: np.ndarray, until_clock: np.ndarray
+) -> dict[str, np.ndarray]:
+    """The :class:`Loop` fields of constraints (D,) (progress clocks), none satisfied yet:
+    by waiter and wait clock (ties by index), and by waitee and threshold."""
+    block = np.lexsort((np.arange(waiter.size), wait_clock, waiter))  # (D,)
+    release = np.lexsort((until_clock, waitee))  # (D,)
+    block_start = np.searchsorted(waiter[block], np.arange(n + 1))
+    release_start = np.searchsorted(waitee[release], np.arange(n + 1))
+    return {
+        "waiter": waiter,
+        "satisfied": np.zeros(waiter.size, dtype=bool),
+        "block_start": block_start,
+        "block_next": block_start[:-1].copy(),
+        "block_clock": wait_clock[block],
+        "block_constraint": block,
+        "release_start": release_start,
+        "next_release": release_start[:-1].copy(),
+        "release_clock": until_clock[release],
+        "release_constraint": release,
+    }
 
 
 def on_clock(paths: Sequence[RobotPath], robot: np.ndarray, s: np.ndarray) -> np.ndarray:
@@ -344,30 +279,8 @@ def on_clock(paths: Sequence[RobotPath], robot: np.ndarray, s: np.ndarray) -> np
     return out
 
 
-def _expand(
-    records: list[tuple[float, float]], path: RobotPath, rate: Rate
-) -> tuple[np.ndarray, np.ndarray]:
-    """Waypoints (wall, clock) between which motion is linear in the plane.
-
-    Between two records a robot either stood still (equal clocks) or moved; inside
-    a move, path vertices (speed or heading changes) and rate changes are added.
-    """
-    walls: list[float] = []
-    clocks: list[float] = []
-    for (w0, c0), (w1, c1) in zip(records[:-1], records[1:], strict=True):
-        walls.append(w0)
-        clocks.append(c0)
-        if c1 <= c0:
-            continue
-        inner_clock = path.times[(path.times > c0) & (path.times < c1)]
-        inner_wall = [rate.advance(w0, c - c0) for c in inner_clock]
-        bp = rate.breakpoints(w0, w1)
-        walls.extend(inner_wall + bp.tolist())
-        clocks.extend(inner_clock.tolist() + [c0 + rate.progress(w0, b) for b in bp])
-    if records:
-        walls.append(records[-1][0])
-        clocks.append(records[-1][1])
-    wall, clock = np.asarray(walls), np.asarray(clocks)
+def _linear_pieces(wall: np.ndarray, clock: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Waypoints (K,) of :func:`~.event_loop.waypoints` in time order, duplicates dropped."""
     order = np.lexsort((clock, wall))
     # A clock computed at a rate edge (c0 + progress) can round one ulp below the one
     # before it; a robot never drives back, so the clock is made non-decreasing.
