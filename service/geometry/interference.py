@@ -230,8 +230,9 @@ def _narrow_phase(
     resolution: float,
     max_boxes: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]:
-    # -> per box (B,): segment a, robot j, (B, 4) [x0, x1, y0, y1], (B, 2) [co-directional,
-    # head-on], and whether they are complete (at most max_boxes). A piece's stretches on
+    # -> per box: segment a (B,), robot j (B,), (4, B) [x0, x1, y0, y1], (2, B)
+    # [co-directional, head-on] (rows, so that later gathers read contiguous memory),
+    # and whether they are complete (at most max_boxes). A piece's stretches on
     # consecutive segments of the same robot j (its path cut at vertices) merge into
     # one box: a 100-point path makes no more boxes than drawn with its corners only.
     near_first, near_end = _near_pieces(pair_a, pair_b, length, p0, p1, reach, resolution)
@@ -241,8 +242,8 @@ def _narrow_phase(
     capacity = min((near_end - near_first).sum(), max_boxes + 1)
     seg = np.empty(capacity, dtype=np.int64)
     robot = np.empty(capacity, dtype=np.int64)
-    span = np.empty((capacity, 4))
-    way = np.empty((capacity, 2), dtype=np.bool_)
+    span = np.empty((4, capacity))
+    way = np.empty((2, capacity), dtype=np.bool_)
     n = 0
     g = 0
     while g < pair_a.size:  # one group of candidates per segment a
@@ -280,16 +281,16 @@ def _narrow_phase(
                         continue
                 if j >= 0:  # a new stretch starts, or the piece ends: emit the one built
                     if n == capacity:
-                        return seg[:0], robot[:0], span[:0], way[:0], False
+                        return seg[:0], robot[:0], span[:, :0], way[:, :0], False
                     seg[n], robot[n] = a, j
-                    span[n, 0], span[n, 1], span[n, 2], span[n, 3] = x0, x1, y0, y1
-                    way[n, 0], way[n, 1] = same_way, head_on
+                    span[0, n], span[1, n], span[2, n], span[3, n] = x0, x1, y0, y1
+                    way[0, n], way[1, n] = same_way, head_on
                     n += 1
                 if c < g_end:
                     j, y0, y1 = seg_robot[b], s0[b] + lo, s0[b] + hi
                     same_way, head_on = cos[c] > cos_same, cos[c] < -cos_same
         g = g_end
-    return seg[:n], robot[:n], span[:n], way[:n], n <= max_boxes
+    return seg[:n], robot[:n], span[:, :n], way[:, :n], n <= max_boxes
 
 
 def interference_boxes(
@@ -334,13 +335,4 @@ def interference_boxes(
             f"paths interfere in more than {max_pairs} places (max_interference_pairs): "
             "split the request or simplify the paths"
         )
-    return Boxes(
-        i=segs.robot[seg],
-        j=j,
-        x0=span[:, 0],
-        x1=span[:, 1],
-        y0=span[:, 2],
-        y1=span[:, 3],
-        co_directional=way[:, 0],
-        head_on=way[:, 1],
-    )
+    return Boxes(segs.robot[seg], j, *span, *way)
