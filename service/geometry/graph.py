@@ -29,6 +29,7 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import networkx as nx
+import numba
 import numpy as np
 
 from service.core.path_schemas import PathsRequest
@@ -201,7 +202,7 @@ def build_graph(paths: Sequence[RobotPath], settings: GeometrySettings) -> Coord
     """
     resolution = settings.effective_resolution(sum(p.length for p in paths))
     boxes = interference_boxes(paths, resolution, settings.margin, settings.max_pairs)
-    node_robot, node_span, box_node_i, box_node_j = _merge_nodes(boxes)
+    node_robot, node_span, box_node_i, box_node_j = _merge_nodes(boxes, len(paths))
     key = box_node_i * max(node_robot.size, 1) + box_node_j  # (B,)
     order = np.argsort(key, kind="stable")
     boxes, key = boxes.take(order), key[order]
@@ -229,50 +230,122 @@ def build_graph(paths: Sequence[RobotPath], settings: GeometrySettings) -> Coord
     return graph
 
 
-def _merge_nodes(boxes: Boxes) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _merge_nodes(
+    boxes: Boxes, n_robots: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Merge each robot's box intervals into nodes (robots without boxes get none).
+
+    A node starts where a robot's interval, in order of start, begins more than
+    TOUCH_TOL after every earlier one (of that robot) has ended. Sorting all 2B
+    intervals cost 0.3 s at 1.7 M boxes, so they are first folded into hulls
+    (:func:`_hulls`, which leaves the nodes exactly as they are) and only the hulls
+    are sorted.
 
     Returns node_robot (V,), node_span (V, 2), and the node of each box on side i
     and on side j (B,) each.
     """
-    robot = np.concatenate([boxes.i, boxes.j])  # (2B,)
-    lo = np.concatenate([boxes.x0, boxes.y0])
-    hi = np.concatenate([boxes.x1, boxes.y1])
-    if robot.size == 0:
-        empty = np.zeros(0, dtype=np.int64)
-        return empty, np.zeros((0, 2)), empty, empty
-    # One float key orders by (robot, lo): measured ~10x faster than lexsort here.
-    stride = float(hi.max()) + 1.0
-    order = np.argsort(robot * stride + lo)
-    robot_s, lo_s, hi_s = robot[order], lo[order], hi[order]
-    # A new node starts where the robot changes or the interval starts after every
-    # interval before it (of the same robot) has ended.
-    new = np.ones(robot_s.size, dtype=bool)
-    for r_start, r_end in _runs(robot_s):
-        reach = np.maximum.accumulate(hi_s[r_start:r_end])
-        new[r_start + 1 : r_end] = lo_s[r_start + 1 : r_end] > reach[:-1] + TOUCH_TOL
-    node_of_sorted = np.cumsum(new) - 1  # (2B,)
-    first = np.flatnonzero(new)  # (V,) where each node starts in the sorted order
-    node_lo = np.minimum.reduceat(lo_s, first)
-    node_hi = np.maximum.reduceat(hi_s, first)
-    node_robot = robot_s[first]
-    node_of = np.empty_like(node_of_sorted)
-    node_of[order] = node_of_sorted
+    hull_robot, hull_lo, hull_hi = _hulls(  # (H,) each
+        boxes.i, boxes.x0, boxes.x1, boxes.j, boxes.y0, boxes.y1, n_robots, TOUCH_TOL
+    )
+    order = np.lexsort((hull_lo, hull_robot))
+    node_robot, node_lo, node_hi = _sweep(
+        hull_robot[order], hull_lo[order], hull_hi[order], TOUCH_TOL
+    )
+    node_first = np.searchsorted(node_robot, np.arange(n_robots + 1))  # (R+1,)
     return (
         node_robot,
         np.stack([node_lo, node_hi], axis=1),
-        node_of[: boxes.size],
-        node_of[boxes.size :],
+        _node_of(boxes.i, boxes.x0, node_first, node_lo),
+        _node_of(boxes.j, boxes.y0, node_first, node_lo),
     )
 
 
-def _runs(sorted_keys: np.ndarray) -> list[tuple[int, int]]:
-    """(start, end) of each run of equal values in a sorted array."""
-    if sorted_keys.size == 0:
-        return []
-    cuts = np.flatnonzero(np.diff(sorted_keys)) + 1
-    bounds = np.concatenate([[0], cuts, [sorted_keys.size]])
-    return list(zip(bounds[:-1].tolist(), bounds[1:].tolist(), strict=True))
+@numba.njit(cache=True, nogil=True)
+def _hulls(
+    robot_i: np.ndarray,  # (B,) int, side i: robot, lo, hi of each box
+    lo_i: np.ndarray,
+    hi_i: np.ndarray,
+    robot_j: np.ndarray,  # (B,) int, side j
+    lo_j: np.ndarray,
+    hi_j: np.ndarray,
+    n_robots: int,
+    tol: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # (H,) robot, lo, hi of each hull
+    """Fold the intervals of both sides, in the order given, into hulls: an interval
+    that overlaps its robot's open hull (within ``tol``) widens it, else it closes that
+    hull and opens its own. A hull is thus a chain of intervals that one node holds, and
+    sorting and sweeping the hulls gives exactly the nodes (and spans) that the
+    intervals give: no interval of a chain starts more than ``tol`` past what the chain
+    before it covers. Boxes come piece by piece along side i's paths, so most fold."""
+    size = robot_i.size + robot_j.size
+    hulls = (np.empty(size, dtype=np.int64), np.empty(size), np.empty(size))
+    is_open = np.zeros(n_robots, dtype=np.bool_)
+    open_lo, open_hi = np.empty(n_robots), np.empty(n_robots)
+    n = _fold(robot_i, lo_i, hi_i, is_open, open_lo, open_hi, hulls, 0, tol)
+    n = _fold(robot_j, lo_j, hi_j, is_open, open_lo, open_hi, hulls, n, tol)
+    for r in range(n_robots):
+        if is_open[r]:
+            hulls[0][n], hulls[1][n], hulls[2][n] = r, open_lo[r], open_hi[r]
+            n += 1
+    return hulls[0][:n], hulls[1][:n], hulls[2][:n]
+
+
+@numba.njit(cache=True, nogil=True)
+def _fold(
+    robot: np.ndarray,  # (B,) int
+    lo: np.ndarray,  # (B,) float
+    hi: np.ndarray,  # (B,) float
+    is_open: np.ndarray,  # (R,) bool, the robot has an open hull
+    open_lo: np.ndarray,  # (R,) float
+    open_hi: np.ndarray,  # (R,) float
+    hulls: tuple[np.ndarray, np.ndarray, np.ndarray],  # closed hulls: robot, lo, hi
+    n: int,
+    tol: float,
+) -> int:
+    """Fold intervals into the open hulls (see :func:`_hulls`); the closed hull count."""
+    for k in range(robot.size):
+        r = robot[k]
+        if is_open[r] and lo[k] <= open_hi[r] + tol and open_lo[r] <= hi[k] + tol:
+            open_lo[r], open_hi[r] = min(open_lo[r], lo[k]), max(open_hi[r], hi[k])
+            continue
+        if is_open[r]:
+            hulls[0][n], hulls[1][n], hulls[2][n] = r, open_lo[r], open_hi[r]
+            n += 1
+        is_open[r], open_lo[r], open_hi[r] = True, lo[k], hi[k]
+    return n
+
+
+@numba.njit(cache=True, nogil=True)
+def _sweep(
+    robot: np.ndarray, lo: np.ndarray, hi: np.ndarray, tol: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # (V,) robot, lo, hi of each node
+    """Nodes of intervals sorted by (robot, lo): a node starts where the robot changes
+    or an interval starts more than ``tol`` after every earlier one has ended."""
+    node_robot = np.empty(robot.size, dtype=np.int64)
+    node_lo, node_hi = np.empty(robot.size), np.empty(robot.size)
+    v = -1
+    for k in range(robot.size):
+        if v < 0 or robot[k] != node_robot[v] or lo[k] > node_hi[v] + tol:
+            v += 1
+            node_robot[v], node_lo[v], node_hi[v] = robot[k], lo[k], hi[k]
+        else:
+            node_hi[v] = max(node_hi[v], hi[k])
+    return node_robot[: v + 1], node_lo[: v + 1], node_hi[: v + 1]
+
+
+@numba.njit(cache=True, nogil=True)
+def _node_of(
+    robot: np.ndarray,  # (B,) int
+    lo: np.ndarray,  # (B,) float, start of each interval
+    node_first: np.ndarray,  # (R+1,) int, nodes of robot r are node_first[r]:node_first[r+1]
+    node_lo: np.ndarray,  # (V,) float
+) -> np.ndarray:  # (B,) int
+    """The node holding each interval: its robot's last node starting at or before it."""
+    out = np.empty(robot.size, dtype=np.int64)
+    for k in range(robot.size):
+        lo_r, hi_r = node_first[robot[k]], node_first[robot[k] + 1]
+        out[k] = lo_r + np.searchsorted(node_lo[lo_r:hi_r], lo[k], side="right") - 1
+    return out
 
 
 def _union_boxes(boxes: Boxes, first: np.ndarray) -> np.ndarray:
