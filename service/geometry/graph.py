@@ -203,12 +203,13 @@ def build_graph(paths: Sequence[RobotPath], settings: GeometrySettings) -> Coord
     resolution = settings.effective_resolution(sum(p.length for p in paths))
     boxes = interference_boxes(paths, resolution, settings.margin, settings.max_pairs)
     node_robot, node_span, box_node_i, box_node_j = _merge_nodes(boxes, len(paths))
-    key = box_node_i * max(node_robot.size, 1) + box_node_j  # (B,)
-    order = np.argsort(key, kind="stable")
-    boxes, key = boxes.take(order), key[order]
+    order = _by_node_pair(box_node_i, box_node_j, node_robot.size)  # (B,)
+    boxes = boxes.take(order)
     box_node_i, box_node_j = box_node_i[order], box_node_j[order]
-    uniq, first = np.unique(key, return_index=True)  # (M,)
-    box_start = np.append(first, key.size)
+    starts = np.ones(boxes.size, dtype=bool)  # (B,) the box starts a conflict
+    starts[1:] = (np.diff(box_node_i) != 0) | (np.diff(box_node_j) != 0)
+    first = np.flatnonzero(starts)  # (M,)
+    box_start = np.append(first, boxes.size)
     conf_node = np.stack([box_node_i[first], box_node_j[first]], axis=1)  # (M, 2)
     conf_span = _union_boxes(boxes, first)
     may_follow = _may_follow(boxes, first)
@@ -346,6 +347,25 @@ def _node_of(
         lo_r, hi_r = node_first[robot[k]], node_first[robot[k] + 1]
         out[k] = lo_r + np.searchsorted(node_lo[lo_r:hi_r], lo[k], side="right") - 1
     return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _by_node_pair(node_i: np.ndarray, node_j: np.ndarray, n_nodes: int) -> np.ndarray:
+    """(B,) box order by (node i, node j), ties kept in box order: a stable sort, by two
+    counting-sort passes (least significant key first; O(B + V) where a comparison sort
+    of the pair keys took 30 ms at 1.7 M boxes)."""
+    order = np.arange(node_i.size)
+    for key in (node_j, node_i):
+        start = np.zeros(n_nodes + 1, dtype=np.int64)  # (V+1,) first slot of each key
+        for k in range(key.size):
+            start[key[k] + 1] += 1
+        start = np.cumsum(start)
+        placed = np.empty_like(order)
+        for k in order:
+            placed[start[key[k]]] = k
+            start[key[k]] += 1
+        order = placed
+    return order
 
 
 def _union_boxes(boxes: Boxes, first: np.ndarray) -> np.ndarray:
