@@ -2,9 +2,9 @@
 
 Independent of how trajectories were made (it reads only timed waypoints and
 radii): for every two robots present at the same time and near each other
-(broad phase: STRtree over trajectory bounding boxes), it merges their waypoint
-times and, on each interval where both move linearly, finds the least centre
-distance in closed form (numba). A robot counts as present from its first
+(broad phase: STRtree over boxes of trajectory pieces, see :func:`check_clearance`),
+it merges their waypoint times and, on each interval where both move linearly, finds
+the least centre distance in closed form (numba). A robot counts as present from its first
 waypoint's time to its last, both included (stricter than "gone at its goal").
 """
 
@@ -22,6 +22,12 @@ __all__ = ["Clearance", "Trajectory", "check_clearance"]
 # Overlap tolerance, metres: gaps above -TOLERANCE count as clear (floating-point rounding
 # of positions interpolated from times of order 1e5 s).
 TOLERANCE = 1e-6
+# Segments per piece of the broad phase, and the gap (metres) below which the piece-wise
+# broad phase finds the least gap exactly. Measured on 250-robot warehouse answers
+# (28,500 waypoints): whole trajectories 0.070 s (3.1 M merged steps), pieces of 16
+# segments 0.023 s (8: 0.039 s, 32: 0.025 s).
+CHUNK = 16
+EXACT_BELOW_M = 1.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -94,25 +100,71 @@ def _at(ts: np.ndarray, ps: np.ndarray, k: int, t: float) -> tuple[float, float]
 
 
 def check_clearance(trajectories: Sequence[Trajectory]) -> Clearance:
-    """Check every two trajectories for overlapping footprints while both are present."""
+    """Check every two trajectories for overlapping footprints while both are present.
+
+    Fast path: pieces of CHUNK waypoints, paired where their boxes (grown by half of
+    EXACT_BELOW_M each) meet while both are present; every pair closer than
+    EXACT_BELOW_M at some time is among them, so when the least gap found is below it,
+    it is the least gap of all pairs (and every overlap is found). Otherwise (robots
+    that never come that close) the whole trajectories of every pair whose bounding
+    boxes meet are compared.
+    """
     if len(trajectories) < 2:
         return Clearance(None, None, None, ())
-    lo = np.array([tr.xy.min(axis=0) - tr.radius for tr in trajectories])  # (R, 2)
-    hi = np.array([tr.xy.max(axis=0) + tr.radius for tr in trajectories])
-    boxes = shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1])
-    a, b = shapely.STRtree(boxes).query(boxes)
-    keep = a < b
-    a, b = a[keep], b[keep]
-    start = np.concatenate([[0], np.cumsum([tr.t.size for tr in trajectories])])  # (R+1,)
-    radius = np.array([tr.radius for tr in trajectories])
-    gaps, whens = _pairs_min_gap(
-        np.concatenate([tr.t for tr in trajectories]),
-        np.concatenate([tr.xy for tr in trajectories]),
-        start,
-        radius,
-        a,
-        b,
-    )
+    t = np.concatenate([tr.t for tr in trajectories])  # (K,)
+    xy = np.concatenate([tr.xy for tr in trajectories])  # (K, 2)
+    sizes = np.array([tr.t.size for tr in trajectories])  # (R,)
+    radius = np.array([tr.radius for tr in trajectories])  # (R,)
+    start = np.concatenate([[0], np.cumsum(sizes)])  # (R+1,)
+    robot, lo, hi = _chunks(xy, sizes, start)
+    result = _least_gaps(t, xy, radius, robot, lo, hi, EXACT_BELOW_M / 2)
+    if result.min_gap is not None and result.min_gap < EXACT_BELOW_M:
+        return result
+    whole = np.arange(len(trajectories))
+    return _least_gaps(t, xy, radius, whole, start[:-1], start[1:], 0.0)
+
+
+def _chunks(
+    xy: np.ndarray, sizes: np.ndarray, start: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pieces of at most CHUNK segments of every trajectory (consecutive pieces share
+    their end waypoint). Shapes: xy (K, 2), sizes (R,), start (R+1,) -> robot, lo, hi
+    (P,) each: piece p is waypoints lo[p]:hi[p] of robot[p]."""
+    n = np.maximum(1, -(-(sizes - 1) // CHUNK))  # (R,) pieces per robot
+    robot = np.repeat(np.arange(sizes.size), n)  # (P,)
+    rank = np.arange(robot.size) - np.repeat(np.cumsum(n) - n, n)  # (P,) index in robot
+    lo = start[robot] + rank * CHUNK
+    hi = np.minimum(lo + CHUNK, start[robot + 1] - 1) + 1
+    return robot, lo, hi
+
+
+def _least_gaps(
+    t: np.ndarray,
+    xy: np.ndarray,
+    radius: np.ndarray,
+    robot: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    grow: float,
+) -> Clearance:
+    """The least gap of every two robots over the pieces (P,) (waypoints lo:hi of robot)
+    whose boxes, grown by their radius and ``grow``, meet while both are present."""
+    first, last = xy[lo], xy[hi - 1]
+    box_lo = np.minimum(np.minimum.reduceat(xy, lo), np.minimum(first, last))  # (P, 2)
+    box_hi = np.maximum(np.maximum.reduceat(xy, lo), np.maximum(first, last))
+    reach = (radius[robot] + grow)[:, None]  # (P, 1)
+    box_lo, box_hi = box_lo - reach, box_hi + reach
+    boxes = shapely.box(box_lo[:, 0], box_lo[:, 1], box_hi[:, 0], box_hi[:, 1])
+    p, q = shapely.STRtree(boxes).query(boxes)  # (C,) each
+    together = np.maximum(t[lo[p]], t[lo[q]]) <= np.minimum(t[hi[p] - 1], t[hi[q] - 1])
+    keep = (robot[p] < robot[q]) & together
+    p, q = p[keep], q[keep]
+    gaps, whens = _pieces_min_gap(t, xy, lo, hi, radius[robot], p, q)  # (C,) each
+    # One entry per pair of robots: its least gap over its pieces.
+    pair = robot[p] * radius.size + robot[q]  # (C,)
+    order = np.lexsort((gaps, pair))
+    least = order[np.flatnonzero(np.diff(pair[order], prepend=-1))]  # (pairs,)
+    gaps, whens, a, b = gaps[least], whens[least], robot[p[least]], robot[q[least]]
     present = np.isfinite(gaps)
     if not present.any():
         return Clearance(None, None, None, ())
@@ -123,23 +175,24 @@ def check_clearance(trajectories: Sequence[Trajectory]) -> Clearance:
 
 
 @numba.njit(cache=True, nogil=True)
-def _pairs_min_gap(
+def _pieces_min_gap(
     t: np.ndarray,  # (K,) all waypoint times, robot by robot
     xy: np.ndarray,  # (K, 2)
-    start: np.ndarray,  # (R+1,) int, robot r's waypoints are start[r]:start[r+1]
-    radius: np.ndarray,  # (R,)
-    a: np.ndarray,  # (C,) int, pairs to check
-    b: np.ndarray,  # (C,) int
+    lo: np.ndarray,  # (P,) int, piece k is waypoints lo[k]:hi[k]
+    hi: np.ndarray,  # (P,) int
+    radius: np.ndarray,  # (P,) the radius of each piece's robot
+    p: np.ndarray,  # (C,) int, pairs of pieces to check
+    q: np.ndarray,  # (C,) int
 ) -> tuple[np.ndarray, np.ndarray]:  # (C,) least gap (inf if never together), when
-    gaps = np.empty(a.size)
-    whens = np.empty(a.size)
-    for c in range(a.size):
-        i, j = a[c], b[c]
+    gaps = np.empty(p.size)
+    whens = np.empty(p.size)
+    for c in range(p.size):
+        i, j = p[c], q[c]
         gaps[c], whens[c] = _pair_min_gap(
-            t[start[i] : start[i + 1]],
-            xy[start[i] : start[i + 1]],
-            t[start[j] : start[j + 1]],
-            xy[start[j] : start[j + 1]],
+            t[lo[i] : hi[i]],
+            xy[lo[i] : hi[i]],
+            t[lo[j] : hi[j]],
+            xy[lo[j] : hi[j]],
             radius[i] + radius[j],
         )
     return gaps, whens

@@ -11,10 +11,16 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import assume, given, settings
+from hypothesis import assume, event, given, settings
 from hypothesis import strategies as st
 
-from service.simulation.clearance import Trajectory, check_clearance
+from service.simulation.clearance import (
+    CHUNK,
+    EXACT_BELOW_M,
+    Clearance,
+    Trajectory,
+    check_clearance,
+)
 from tests.motion.reference_clearance import position, reference_clearance
 
 MAX_SPEED = 3.0  # m/s of the random trajectories
@@ -24,13 +30,14 @@ BAND = 0.03  # verdicts closer to zero than this are not drawn
 
 
 @st.composite
-def trajectories_st(draw: st.DrawFn) -> list[Trajectory]:
-    """2-4 robots, 2-6 waypoints each, waits (repeated positions), speeds <= MAX_SPEED."""
+def trajectories_st(draw: st.DrawFn, steps: tuple[int, int] = (1, 5)) -> list[Trajectory]:
+    """2-4 robots, ``steps`` + 1 waypoints each, waits (repeated positions), speeds <=
+    MAX_SPEED."""
     out = []
     for _ in range(draw(st.integers(2, 4))):
         t = [draw(st.floats(0.0, 5.0))]
         xy = [np.array([draw(st.floats(0.0, 4.0)), draw(st.floats(0.0, 4.0))])]
-        for _ in range(draw(st.integers(1, 5))):
+        for _ in range(draw(st.integers(*steps))):
             dt = draw(st.floats(0.1, 3.0))
             heading = draw(st.floats(0.0, 2 * np.pi))
             dist = draw(st.sampled_from([0.0, 1.0])) * draw(st.floats(0.0, MAX_SPEED * dt))
@@ -49,6 +56,22 @@ def _gap_at(trajs: list[Trajectory], i: int, j: int, t: float) -> float:
 @settings(max_examples=80, deadline=None, derandomize=True)
 @given(trajs=trajectories_st())
 def test_check_agrees_with_the_sampled_reference(trajs: list[Trajectory]) -> None:
+    _assert_agrees_with_reference(trajs)
+
+
+@settings(max_examples=30, deadline=None, derandomize=True)
+@given(trajs=trajectories_st(steps=(CHUNK + 1, 3 * CHUNK)))
+def test_long_trajectories_checked_piece_by_piece_agree_with_the_reference(
+    trajs: list[Trajectory],
+) -> None:
+    """Several broad-phase pieces per robot: the pieces' least gaps are the pairs'."""
+    result = _assert_agrees_with_reference(trajs)
+    close = result.min_gap is not None and result.min_gap < EXACT_BELOW_M
+    event("pieces (least gap below EXACT_BELOW_M)" if close else "whole trajectories")
+
+
+def _assert_agrees_with_reference(trajs: list[Trajectory]) -> Clearance:
+    """The check's verdicts and least gaps are the sampled reference's; returns the check."""
     ref = reference_clearance(trajs, STEP_S)
     assume(all(abs(g) >= BAND for g in ref.pair_gap.values()))
     result = check_clearance(trajs)
@@ -65,8 +88,11 @@ def test_check_agrees_with_the_sampled_reference(trajs: list[Trajectory]) -> Non
         assert result.min_gap <= ref.pair_gap[result.pair] + 1e-9
         assert result.min_gap >= ref.pair_gap[result.pair] - SAMPLING_ERR
         assert _gap_at(trajs, *result.pair, result.time) == pytest.approx(result.min_gap, abs=1e-6)
+        if result.min_gap < EXACT_BELOW_M:  # then the least of every pair, not only of its own
+            assert result.min_gap <= ref.min_gap + 1e-9
     else:
         assert ref.min_gap is None or ref.min_gap > 0
+    return result
 
 
 def _line(t: list[float], xy: list[list[float]], radius: float = 0.5) -> Trajectory:
