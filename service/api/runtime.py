@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import gc
 import logging
 import os
 import time
@@ -20,6 +19,7 @@ from service.core.path_schemas import PathsRequest
 from service.core.problem import ProblemError
 from service.core.schemas import OBJECTIVES, OptionsIn, ScheduleRequest
 from service.geometry.graph import GeometrySettings
+from service.memory import settle
 from service.motion.plan import plan_paths
 from service.settings import Settings
 from service.solvers.dispatch import LAST_RESORT, DispatchPolicy, dispatch
@@ -240,8 +240,7 @@ def warm_up(runtime: Runtime) -> None:
         log.exception("not ready: warm-up failed")
         return
     # Everything alive now (models, compiled kernels, the app) lives as long as the
-    # process: moved out of the cyclic collector's reach, so full collections walk only
-    # what requests allocate (full collections were 0.5 s pauses at 250 robots).
-    gc.freeze()
+    # process: out of the cyclic collector's reach, and full collections rarer.
+    settle()
     runtime.ready, runtime.detail = True, "ready"
     log.info("ready: warm-up took %.2f s", time.perf_counter() - start)

@@ -12,12 +12,8 @@ does the same work for a single request.
 
 from __future__ import annotations
 
-import gc
-import threading
 import time
 from collections import deque
-from collections.abc import Iterator
-from contextlib import contextmanager
 
 import numpy as np
 
@@ -34,9 +30,10 @@ from service.core.schemas import (
     ScheduleResponse,
     SolverName,
 )
+from service.memory import collection_deferred
 from service.solvers.dispatch import DispatchPolicy, render_reserve, solve_problem
 
-__all__ = ["Rescheduler", "collection_deferred"]
+__all__ = ["Rescheduler"]
 
 # The solver of a re-schedule stops early enough for the slowest of the last TAILS
 # calls' checking and rendering (more precisely their 90th percentile) to fit the budget:
@@ -44,36 +41,6 @@ __all__ = ["Rescheduler", "collection_deferred"]
 # many times, so it is measured rather than modelled alone (render_reserve is the floor).
 TAILS = 20
 TAIL_QUANTILE = 0.9
-
-_gc_lock = threading.Lock()
-_gc_depth = 0  # calls inside collection_deferred, all threads
-_gc_was_enabled = False
-
-
-@contextmanager
-def collection_deferred() -> Iterator[None]:
-    """Run the block without automatic garbage collection, then restore it.
-
-    A 250-robot re-schedule allocates ~10^5 container objects (the previous
-    assignment's entries, the answer's), which triggered a full collection on nearly
-    every call; each walks every live object of the process (in the disturbance
-    benchmark, its planned worlds): 20-400 ms pauses inside a 100 ms budget. Deferred,
-    the collection runs after the answer, between re-schedules. Nested and concurrent
-    calls are counted, so collection resumes when the last one leaves.
-    """
-    global _gc_depth, _gc_was_enabled
-    with _gc_lock:
-        if _gc_depth == 0:
-            _gc_was_enabled = gc.isenabled()
-            gc.disable()
-        _gc_depth += 1
-    try:
-        yield
-    finally:
-        with _gc_lock:
-            _gc_depth -= 1
-            if _gc_depth == 0 and _gc_was_enabled:
-                gc.enable()
 
 
 class Rescheduler:

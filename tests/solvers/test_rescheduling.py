@@ -4,7 +4,6 @@ answer, for every solver; the Rescheduler answers like dispatch with the same re
 from __future__ import annotations
 
 import gc
-import threading
 from typing import Any
 
 import numpy as np
@@ -19,7 +18,7 @@ from service.core.progress import previous_from_wire, progress_from_wire, residu
 from service.core.schemas import PreviousConflictIn, ProgressIn, ScheduleRequest
 from service.learning.generate import stitched_problem
 from service.solvers.dispatch import DispatchPolicy, dispatch, render_reserve
-from service.solvers.rescheduling import Rescheduler, collection_deferred
+from service.solvers.rescheduling import Rescheduler
 
 POLICY = DispatchPolicy()
 SOLVERS = ("auto", "tabu", "fcfs", "random", "bbts", "cmaes")
@@ -107,50 +106,6 @@ def test_rescheduler_answers_like_dispatch(seed: int) -> None:
     cached = rs.solve(previous, body.progress, time_limit_s=1.0, solver="fcfs")
     assert cached.cost == pytest.approx(direct.cost, rel=1e-12)
     assert cached.assignment == direct.assignment
-
-
-@pytest.mark.parametrize("enabled", [True, False])
-def test_collection_deferred_restores_the_collector(enabled: bool) -> None:
-    """Paused inside (nested too), restored after, also when the block raises."""
-    was = gc.isenabled()
-    (gc.enable if enabled else gc.disable)()
-    try:
-        with pytest.raises(KeyError), collection_deferred():
-            assert not gc.isenabled()
-            with collection_deferred():
-                assert not gc.isenabled()
-            assert not gc.isenabled()
-            raise KeyError("boom")
-        assert gc.isenabled() == enabled
-    finally:
-        (gc.enable if was else gc.disable)()
-
-
-def test_collection_resumes_when_the_last_concurrent_call_leaves() -> None:
-    """Two threads overlap: the first to leave must not resume collection under the other."""
-    assert gc.isenabled()
-    inside, leave_first, first_left = threading.Event(), threading.Event(), threading.Event()
-    seen: list[bool] = []
-
-    def first() -> None:
-        with collection_deferred():
-            inside.set()
-            leave_first.wait(5)
-        first_left.set()
-
-    def second() -> None:
-        inside.wait(5)
-        with collection_deferred():
-            leave_first.set()
-            first_left.wait(5)
-            seen.append(gc.isenabled())
-
-    threads = [threading.Thread(target=first), threading.Thread(target=second)]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join(10)
-    assert seen == [False] and gc.isenabled()
 
 
 def test_a_reschedule_leaves_the_collector_as_it_was() -> None:
