@@ -31,6 +31,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 
 from service.simulation.clearance import Trajectory
@@ -42,7 +43,9 @@ __all__ = [
     "Profile",
     "Rate",
     "Window",
+    "advance",
     "played_by_clock",
+    "progress",
     "rates_of",
 ]
 
@@ -90,37 +93,57 @@ class Rate:
 
     def progress(self, t0: float, t1: float) -> float:
         """Progress-clock seconds gained moving from wall time t0 to t1 >= t0."""
-        if self.constant:
-            return t1 - t0
-        lo = np.clip(self.edges[:-1], t0, t1)
-        hi = np.clip(self.edges[1:], t0, t1)
-        inside = hi - lo  # (K,) wall seconds spent in each piece
-        return float((t1 - t0) - inside.sum() + (inside * self.value).sum())
+        return float(progress(self.edges, self.value, 0, self.value.size, t0, t1))
 
     def advance(self, t0: float, gain: float) -> float:
         """The wall time at which a robot moving from t0 has gained ``gain`` progress seconds."""
-        if self.constant or gain <= 0.0:
-            return t0 + max(gain, 0.0)
-        t, left = t0, gain
-        for k in range(self.value.size):
-            a, b = self.edges[k], self.edges[k + 1]
-            if b <= t:
-                continue
-            if t < a:  # rate 1 before this piece
-                if a - t >= left:
-                    return t + left
-                left -= a - t
-                t = a
-            if self.value[k] > 0.0:
-                if (b - t) * self.value[k] >= left:
-                    return t + left / self.value[k]
-                left -= (b - t) * self.value[k]
-            t = b
-        return t + left
+        return float(advance(self.edges, self.value, 0, self.value.size, t0, gain))
 
     def breakpoints(self, t0: float, t1: float) -> np.ndarray:
         """Wall times strictly inside (t0, t1) where the rate changes."""
         return self.edges[(self.edges > t0) & (self.edges < t1)]
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def progress(
+    edges: np.ndarray, value: np.ndarray, first: int, pieces: int, t0: float, t1: float
+) -> float:
+    """Progress-clock seconds gained from wall time t0 to t1 >= t0 at a piecewise rate:
+    ``value[first + k]`` on ``[edges[first + k], edges[first + k + 1])`` for k < ``pieces``,
+    1 outside (arrays that hold several rates: the executor's, one per robot)."""
+    inside, weighted = 0.0, 0.0  # wall seconds spent in the pieces, and progress there
+    for k in range(first, first + pieces):
+        a = min(max(edges[k], t0), t1)
+        b = min(max(edges[k + 1], t0), t1)
+        inside += b - a
+        weighted += (b - a) * value[k]
+    return (t1 - t0) - inside + weighted
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def advance(
+    edges: np.ndarray, value: np.ndarray, first: int, pieces: int, t0: float, gain: float
+) -> float:
+    """The wall time at which a robot moving from t0 at the piecewise rate of
+    :func:`progress` has gained ``gain`` progress seconds."""
+    if gain <= 0.0:
+        return t0
+    t, left = t0, gain
+    for k in range(first, first + pieces):
+        a, b = edges[k], edges[k + 1]
+        if b <= t:
+            continue
+        if t < a:  # rate 1 before this piece
+            if a - t >= left:
+                return t + left
+            left -= a - t
+            t = a
+        if value[k] > 0.0:
+            if (b - t) * value[k] >= left:
+                return t + left / value[k]
+            left -= (b - t) * value[k]
+        t = b
+    return t + left
 
 
 def rates_of(ids: Sequence[str], disturbances: Sequence[Disturbance]) -> list[Rate]:

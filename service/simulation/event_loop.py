@@ -34,6 +34,8 @@ import numpy as np
 from numba import types
 from numba.typed import List
 
+from service.simulation.disturbances import advance, progress
+
 __all__ = [
     "RECORD",
     "Loop",
@@ -57,8 +59,9 @@ class Loop(NamedTuple):
     by (waiter, wait clock), ``block_next[r]`` is robot r's first not yet known to be
     satisfied; ``release_*`` lists them by (waitee, threshold), ``next_release[r]`` is
     robot r's first threshold not yet reached. Rates: robot r's pieces are
-    ``rate_edge[rate_start[r] + r : rate_start[r + 1] + r + 1]`` (K + 1 edges) and
-    ``rate_value[rate_start[r] : rate_start[r + 1]]`` (K values); K = 0 is rate 1.
+    ``rate_value[rate_start[r] + k]`` on ``[rate_edge[rate_start[r] + k], rate_edge[... + k +
+    1])`` for k < K = ``rate_start[r + 1] - rate_start[r] - 1`` (K + 1 edges and, padded,
+    K + 1 values per robot); K = 0 is rate 1.
     """
 
     clock: np.ndarray  # (R,) float
@@ -71,7 +74,7 @@ class Loop(NamedTuple):
     done: np.ndarray  # (R,) bool
     rate_start: np.ndarray  # (R+1,) int
     rate_edge: np.ndarray  # (E + R,) float
-    rate_value: np.ndarray  # (E,) float
+    rate_value: np.ndarray  # (E + R,) float
     waiter: np.ndarray  # (D,) int
     satisfied: np.ndarray  # (D,) bool
     block_start: np.ndarray  # (R+1,) int
@@ -147,36 +150,15 @@ def clocks_at(loop: Loop, wall: float) -> np.ndarray:
 @numba.njit(cache=True, nogil=True, inline="always")
 def rate_progress(loop: Loop, r: int, t0: float, t1: float) -> float:
     """Progress-clock seconds robot r gains moving from wall time t0 to t1 >= t0."""
-    inside, weighted = 0.0, 0.0  # wall seconds spent in the pieces, and progress there
-    for k in range(loop.rate_start[r], loop.rate_start[r + 1]):
-        a = min(max(loop.rate_edge[k + r], t0), t1)
-        b = min(max(loop.rate_edge[k + r + 1], t0), t1)
-        inside += b - a
-        weighted += (b - a) * loop.rate_value[k]
-    return (t1 - t0) - inside + weighted
+    first, pieces = loop.rate_start[r], loop.rate_start[r + 1] - loop.rate_start[r] - 1
+    return progress(loop.rate_edge, loop.rate_value, first, pieces, t0, t1)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def rate_advance(loop: Loop, r: int, t0: float, gain: float) -> float:
     """The wall time at which robot r, moving from t0, has gained ``gain`` progress."""
-    if gain <= 0.0:
-        return t0
-    t, left = t0, gain
-    for k in range(loop.rate_start[r], loop.rate_start[r + 1]):
-        a, b, value = loop.rate_edge[k + r], loop.rate_edge[k + r + 1], loop.rate_value[k]
-        if b <= t:
-            continue
-        if t < a:  # rate 1 before this piece
-            if a - t >= left:
-                return t + left
-            left -= a - t
-            t = a
-        if value > 0.0:
-            if (b - t) * value >= left:
-                return t + left / value
-            left -= (b - t) * value
-        t = b
-    return t + left
+    first, pieces = loop.rate_start[r], loop.rate_start[r + 1] - loop.rate_start[r] - 1
+    return advance(loop.rate_edge, loop.rate_value, first, pieces, t0, gain)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -212,7 +194,7 @@ def waypoints(
                 out_robot.append(r)
                 out_wall.append(rate_advance(loop, r, w0, c - c0))
                 out_clock.append(c)
-            for e in range(loop.rate_start[r] + r, loop.rate_start[r + 1] + r + 1):
+            for e in range(loop.rate_start[r], loop.rate_start[r + 1]):
                 if w0 < loop.rate_edge[e] < w1:
                     out_robot.append(r)
                     out_wall.append(loop.rate_edge[e])
