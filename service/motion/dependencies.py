@@ -103,7 +103,8 @@ def sections(
     gaps keeps separate meeting places (two routes that meet twice) apart.
     """
     label = np.empty(x0.size, dtype=np.int64)
-    by_x = np.argsort(x0, kind="mergesort")
+    # Boxes usually come in order of i's pieces already: no sort then.
+    by_x = np.arange(x0.size) if np.all(x0[1:] >= x0[:-1]) else np.argsort(x0, kind="mergesort")
     n_labels, k = 0, 0
     while k < by_x.size:  # one run of boxes overlapping along i
         end, reach = k + 1, x1[by_x[k]]
@@ -150,6 +151,11 @@ def _plan_kernel(
         if not following[m]:  # one constraint per section: its start until its end
             label = sections(x0[lo:hi], x1[lo:hi], y0[lo:hi], y1[lo:hi])
             n = label.max() + 1
+            if n == 1:  # most conflicts: one meeting place, one constraint
+                waiters[n_out], waits[n_out] = waiter, wait.min()
+                waitees[n_out], untils[n_out] = waitee, until.max()
+                n_out += 1
+                continue
             group_wait = np.full(n, np.inf)
             group_until = np.full(n, -np.inf)
             for b in range(label.size):
