@@ -53,11 +53,15 @@ def plan_to_wire(paths: Sequence[RobotPath], plan: DependencyPlan) -> list[Depen
         for w, u in zip(waitee[entry].tolist(), until.tolist(), strict=True)
     ]
     bounds = np.append(point, entry.size).tolist()
-    waits: list[list[WaitPoint]] = [[] for _ in paths]
-    heads = entry[point]  # (P,) first row of each point
-    for k, (r, s) in enumerate(zip(waiter[heads].tolist(), wait_s[heads].tolist(), strict=True)):
-        waits[r].append({"s": s, "after": after[bounds[k] : bounds[k + 1]]})
-    return [{"robot": rid, "waits": w} for rid, w in zip(ids, waits, strict=True)]
+    heads = entry[point]  # (P,) first row of each point, in order of robot and point
+    points: list[WaitPoint] = [
+        {"s": s, "after": after[a:b]}
+        for s, a, b in zip(wait_s[heads].tolist(), bounds[:-1], bounds[1:], strict=True)
+    ]
+    by_robot = np.searchsorted(waiter[heads], np.arange(len(paths) + 1)).tolist()  # (R+1,)
+    return [
+        {"robot": rid, "waits": points[by_robot[r] : by_robot[r + 1]]} for r, rid in enumerate(ids)
+    ]
 
 
 def _run_starts(*keys: np.ndarray) -> np.ndarray:
