@@ -127,8 +127,8 @@ class CoordinationGraph:
 
         Built in bulk (times by one interpolation per robot and side, ids and dicts from
         Python lists) and validated once: per-conflict interpolation and numpy scalars
-        cost 0.4 s at 23,000 conflicts. Validation (pydantic-core, ~80 ms there) stays:
-        ``model_construct`` measured 2-3x slower than validating the same dicts.
+        cost 0.22 s at 23,000 conflicts, the bulk build 0.02 s. Validation (pydantic-core,
+        0.06 s there) stays: ``model_construct`` measured 2-3x slower than validating.
         """
         if self.node_robot.size == 0:
             return None
@@ -352,8 +352,8 @@ def _node_of(
 @numba.njit(cache=True, nogil=True)
 def _by_node_pair(node_i: np.ndarray, node_j: np.ndarray, n_nodes: int) -> np.ndarray:
     """(B,) box order by (node i, node j), ties kept in box order: a stable sort, by two
-    counting-sort passes (least significant key first; O(B + V) where a comparison sort
-    of the pair keys took 30 ms at 1.7 M boxes)."""
+    counting-sort passes (least significant key first), O(B + V). At 1.7 M boxes a
+    stable argsort of pair keys with np.unique took 50-65 ms, this 40-50 ms."""
     order = np.arange(node_i.size)
     for key in (node_j, node_i):
         start = np.zeros(n_nodes + 1, dtype=np.int64)  # (V+1,) first slot of each key
