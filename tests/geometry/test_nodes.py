@@ -14,7 +14,7 @@ from service.geometry.interference import Boxes
 # Starts on a coarse grid, nudged by about the tolerance, so that intervals touch, overlap
 # and leave gaps just below and above TOUCH_TOL in every order.
 NUDGES = (-2 * TOUCH_TOL, -TOUCH_TOL, -0.5 * TOUCH_TOL, 0.0, 0.5 * TOUCH_TOL, 1.5 * TOUCH_TOL)
-LENGTHS = (1e-3, 0.25, 0.5, 1.0)
+LENGTHS = (0.0, 1e-3, 0.25, 0.5, 1.0)  # 0: a stretch rounded to a point
 
 
 @st.composite
