@@ -15,6 +15,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 from typing_extensions import TypedDict
 
 from service.core.schemas import (
+    MAX_ID_LENGTH,
     MAX_TIME,
     AssignmentOut,
     ChecksOut,
@@ -62,7 +63,12 @@ Coordinate = Annotated[
 ]
 Point = tuple[Coordinate, Coordinate]
 Time = Annotated[float, Field(strict=True, ge=0.0, le=MAX_TIME, allow_inf_nan=False)]
-Id = Annotated[str, Field(min_length=1, max_length=200)]
+Id = Annotated[str, Field(min_length=1, max_length=MAX_ID_LENGTH)]
+# A robot's nodes in the derived graph are "<robot id>/<k>": its id leaves room for "/"
+# and seven digits (k < the geometry's MAX_PIECES = 2e6 pieces of all paths), so that
+# every node id fits the graph form's MAX_ID_LENGTH.
+MAX_ROBOT_ID_LENGTH = MAX_ID_LENGTH - 8
+RobotId = Annotated[str, Field(min_length=1, max_length=MAX_ROBOT_ID_LENGTH)]
 
 
 class PathRobotIn(BaseModel):
@@ -70,7 +76,7 @@ class PathRobotIn(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    id: Id
+    id: RobotId
     path: list[Point] = Field(min_length=2)
     radius: float = Field(gt=0.0, le=MAX_RADIUS, allow_inf_nan=False, strict=True)
     speed: float | None = Field(

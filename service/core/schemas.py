@@ -74,7 +74,8 @@ SOLVER_NAMES: tuple[SolverName, ...] = get_args(SolverName)
 
 Time = Annotated[float, Field(strict=True, ge=0.0, le=MAX_TIME, allow_inf_nan=False)]
 Count = Annotated[int, Field(strict=True, ge=1, le=MAX_COUNT)]
-Id = Annotated[str, Field(min_length=1, max_length=200)]
+MAX_ID_LENGTH = 200
+Id = Annotated[str, Field(min_length=1, max_length=MAX_ID_LENGTH)]
 
 
 class _Strict(BaseModel):

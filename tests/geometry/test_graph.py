@@ -12,10 +12,11 @@ from typing import Any
 import numpy as np
 import pytest
 from hypothesis import given, settings
+from pydantic import ValidationError
 
-from service.core.path_schemas import PathsRequest
+from service.core.path_schemas import MAX_ROBOT_ID_LENGTH, PathsRequest
 from service.core.problem import ProblemError, problem_from_request
-from service.core.schemas import ScheduleRequest
+from service.core.schemas import MAX_ID_LENGTH, ScheduleRequest
 from service.geometry.graph import CoordinationGraph, GeometrySettings, build_graph
 from service.geometry.paths import RobotPath
 from service.motion.plan import coordination_graph
@@ -325,3 +326,19 @@ def test_no_interference_gives_no_graph() -> None:
     assert graph.to_request(req) is None
     assert graph.isolated_robots() == ["a", "b"]
     assert graph.n_conflicts == 0
+
+
+def test_the_longest_robot_ids_still_name_valid_nodes() -> None:
+    """Node ids are "<robot id>/<k>": a robot id of the paths form's longest length gives
+    node ids within the graph form's limit; one character more is refused by name (422),
+    never a graph the service cannot validate (it answered 503)."""
+    longest = MAX_ROBOT_ID_LENGTH
+    ids = ["h" * longest, "v" * longest]
+    req, graph = _graph([robot(ids[0], [[0, 5], [10, 5]]), robot(ids[1], [[5, 0], [5, 10]])])
+    wire = assert_graph_sound(req, graph)
+    assert wire is not None and max(len(n) for n in graph.node_ids()) <= MAX_ID_LENGTH
+    body = req.model_dump(exclude_none=True)
+    body["robots"][1]["id"] = "v" * (longest + 1)
+    with pytest.raises(ValidationError) as err:
+        PathsRequest.model_validate(body)
+    assert [e["loc"] for e in err.value.errors()] == [("robots", 1, "id")]
