@@ -10,8 +10,11 @@ from typing import Any
 import numpy as np
 import pytest
 
+import service.core.problem as problem_module
 from service.core.problem import Problem, ProblemError, problem_from_request
 from service.core.schemas import ScheduleRequest
+from service.learning.generate import stitched_problem
+from tests.reference import tiny_request
 
 # r0: n0 [0, 4], n1 [6, 9] (density 2), goal 12;  r1: m0 [1, 5] (density 3).
 # c0: n0 (section [1, 3]) with m0 (default: the whole node [1, 5]);
@@ -199,3 +202,24 @@ def test_times_are_exact_keys() -> None:
     p = _build(req)
     assert p.tp_time[p.tp_start[1] : p.tp_start[2]].tolist() == [1.0, t, 5.0]
     assert p.tp_pair_enter.tolist() == [[1, 7], [8, 4]]
+
+
+@pytest.mark.parametrize(
+    "body",
+    [tiny_request(seed) for seed in range(12)]
+    + [stitched_problem(seed, 40, 3.0) for seed in range(3)]
+    + [EXAMPLE],
+)
+def test_valid_conflicts_read_in_bulk_equal_the_walk(
+    body: dict[str, Any], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The bulk reading of valid conflicts builds the problem the per-conflict walk does
+    (the walk also checks faulty ones: every rule above goes through it)."""
+    req = ScheduleRequest.model_validate(body)
+    bulk = problem_from_request(req)
+    monkeypatch.setattr(problem_module, "_valid_conflicts", lambda *args: None)
+    walked = problem_from_request(req)
+    for field in ("conf_a", "conf_b", "pair_enter", "pair_exit", "tp_pair_enter", "tp_time"):
+        a, b = getattr(bulk, field), getattr(walked, field)
+        assert a.dtype == b.dtype and a.shape == b.shape and np.array_equal(a, b), field
+    assert bulk.pair_exit.shape[0] == len(req.conflicts)
