@@ -1,7 +1,7 @@
 """Density cliques of a problem and their budgets of following-type conflicts.
 
 The contract limits crowding per clique of the conflict graph: for every
-maximal clique K (networkx), rho_K = min density of its nodes and at most
+maximal clique K, rho_K = min density of its nodes and at most
 h_K = rho_K (rho_K + 1) / 2 - 1 of the conflicts inside K may be following-type;
 each explicit ``density_limits`` entry adds the same kind of clique with
 rho = its ``max_robots``. Only cliques with at least one conflict matter.
@@ -10,6 +10,11 @@ Maximal cliques can be exponentially many (a complete multipartite conflict
 graph of k robots with n nodes each has n^k), so the enumeration stops with
 :class:`TooManyCliques` once the cliques hold more conflicts than the budget
 set by :func:`clique_budget`; the service sets it per request, CLIs leave it unbounded.
+
+The enumeration is compiled (Bron-Kerbosch with Tomita's pivot, vertices in degeneracy
+order, each neighbourhood as a bitset matrix: Eppstein, Loffler and Strash 2010);
+networkx's took 0.48 s for a 250-robot warehouse's 2,860 cliques. Cliques are listed in
+a canonical order (members sorted, cliques sorted), whatever the enumeration's order.
 """
 
 from __future__ import annotations
@@ -19,8 +24,10 @@ from contextlib import contextmanager
 from contextvars import ContextVar
 from dataclasses import dataclass
 
-import networkx as nx
+import numba
 import numpy as np
+from numba import types
+from numba.typed import List
 
 from service.core.problem import Problem
 
@@ -109,10 +116,8 @@ def find_cliques(problem: Problem) -> Cliques:
     Raises:
         TooManyCliques: the cliques exceed the budget of :func:`clique_budget`.
     """
-    graph = nx.Graph()
-    graph.add_edges_from(zip(problem.conf_a.tolist(), problem.conf_b.tolist(), strict=True))
+    groups = _conflict_cliques(problem, _MAX_INCIDENCES.get())
     density = problem.node_density
-    groups = _bounded(nx.find_cliques(graph), _MAX_INCIDENCES.get())
     budgets = [budget_for(int(density[m].min())) for m in groups]
     groups += [lim.nodes.tolist() for lim in problem.density_limits]
     budgets += [budget_for(lim.max_robots) for lim in problem.density_limits]
@@ -125,16 +130,239 @@ def find_cliques(problem: Problem) -> Cliques:
     )
 
 
-def _bounded(cliques: Iterator[list[int]], max_incidences: int | None) -> list[list[int]]:
-    """Every clique of ``cliques``, stopping as soon as they hold more than ``max_incidences``."""
-    groups: list[list[int]] = []
-    incidences = 0
-    for members in cliques:
-        incidences += len(members) * (len(members) - 1) // 2
-        if max_incidences is not None and incidences > max_incidences:
-            raise TooManyCliques(max_incidences)
-        groups.append(members)
+def _conflict_cliques(problem: Problem, max_incidences: int | None) -> list[list[int]]:
+    """Every maximal clique of the conflict graph: node lists, each sorted, in sorted order.
+
+    Raises:
+        TooManyCliques: they hold more than ``max_incidences`` conflicts in all.
+    """
+    n = problem.node_robot.size
+    a = np.concatenate([problem.conf_a, problem.conf_b])  # (2M,) both directions
+    b = np.concatenate([problem.conf_b, problem.conf_a])
+    order = np.lexsort((b, a))
+    neighbours = b[order]  # (2M,) sorted within each node
+    start = np.searchsorted(a[order], np.arange(n + 1))  # (V+1,)
+    bound = -1 if max_incidences is None else max_incidences
+    members, ends, complete = _maximal_cliques(start, neighbours, bound)
+    if not complete:
+        assert max_incidences is not None
+        raise TooManyCliques(max_incidences)
+    flat = np.asarray(members, dtype=np.int64)
+    bounds = np.concatenate([[0], np.asarray(ends, dtype=np.int64)]).tolist()
+    groups = [sorted(flat[lo:hi].tolist()) for lo, hi in zip(bounds[:-1], bounds[1:], strict=True)]
+    groups.sort()
     return groups
+
+
+@numba.njit(cache=True, nogil=True)
+def _maximal_cliques(
+    start: np.ndarray, neighbours: np.ndarray, bound: int
+) -> tuple[List, List, bool]:
+    """Maximal cliques of two or more vertices of a graph in CSR form (vertex v's sorted
+    neighbours are ``neighbours[start[v]:start[v + 1]]``): their members (flat), the end
+    of each clique in them, and False when they hold more than ``bound`` >= 0 vertex
+    pairs (the enumeration stops there; -1: no bound).
+
+    Each vertex v, in degeneracy order, starts the cliques whose earliest vertex it is:
+    candidates are its later neighbours, excluded its earlier ones, and its
+    neighbourhood's adjacency is a bitset matrix (:func:`_cliques_through`).
+    """
+    n = start.size - 1
+    rank = _degeneracy_rank(start, neighbours)  # (V,) position in degeneracy order
+    members = List.empty_list(types.int64)
+    ends = List.empty_list(types.int64)
+    local = np.full(n, -1, dtype=np.int64)  # (V,) vertex -> its index among v's neighbours
+    pairs = np.zeros(1, dtype=np.int64)  # vertex pairs inside the cliques so far
+    for v in np.argsort(rank):
+        universe = neighbours[start[v] : start[v + 1]]  # (d,) v's neighbours
+        d = universe.size
+        if d == 0:
+            continue
+        words = (d + 63) // 64
+        for k in range(d):
+            local[universe[k]] = k
+        adj = np.zeros((d, words), dtype=np.uint64)  # (d, W) bitsets
+        for k in range(d):
+            w = universe[k]
+            for u in neighbours[start[w] : start[w + 1]]:
+                if local[u] >= 0:
+                    adj[k, local[u] // 64] |= np.uint64(1) << np.uint64(local[u] % 64)
+        later = np.zeros(words, dtype=np.uint64)
+        for k in range(d):
+            if rank[universe[k]] > rank[v]:
+                later[k // 64] |= np.uint64(1) << np.uint64(k % 64)
+        complete = _cliques_through(v, later, adj, universe, members, ends, pairs, bound)
+        for k in range(d):
+            local[universe[k]] = -1
+        if not complete:
+            return members, ends, False
+    return members, ends, True
+
+
+@numba.njit(cache=True, nogil=True)
+def _cliques_through(
+    v: int,
+    later: np.ndarray,
+    adj: np.ndarray,
+    universe: np.ndarray,
+    members: List,
+    ends: List,
+    pairs: np.ndarray,
+    bound: int,
+) -> bool:
+    """The maximal cliques holding v and, otherwise, only v's ``later`` neighbours:
+    Bron-Kerbosch with Tomita's pivot, iterative (an explicit stack of candidate,
+    excluded and still-to-try bitsets per depth). Shapes: later (W,), adj (d, W) over
+    the d neighbours ``universe``. False once the cliques hold more than ``bound``
+    vertex pairs."""
+    d, words = adj.shape
+    cand = np.zeros((d + 1, words), dtype=np.uint64)
+    excl = np.zeros((d + 1, words), dtype=np.uint64)
+    todo = np.zeros((d + 1, words), dtype=np.uint64)
+    chosen = np.full(d + 1, -1, dtype=np.int64)  # the vertex being tried at each depth
+    clique = np.empty(d + 1, dtype=np.int64)  # universe indices; v itself is implied
+    cand[0] = later
+    excl[0] = ~later & _all_bits(d, words)
+    if not later.any():  # v's cliques all hold an earlier vertex: found from there
+        return True
+    todo[0] = later & ~adj[_pivot(cand[0], excl[0], adj)]
+    level = 0
+    while level >= 0:
+        u = chosen[level]
+        if u >= 0:  # u was tried: it moves from the candidates to the excluded
+            bit = np.uint64(1) << np.uint64(u % 64)
+            cand[level, u // 64] &= ~bit
+            excl[level, u // 64] |= bit
+            chosen[level] = -1
+        u = _first_bit(todo[level])
+        if u < 0:
+            level -= 1
+            continue
+        todo[level, u // 64] &= ~(np.uint64(1) << np.uint64(u % 64))
+        chosen[level] = u
+        clique[level] = u
+        next_cand = cand[level] & adj[u]
+        next_excl = excl[level] & adj[u]
+        if not next_cand.any():
+            maximal = not next_excl.any()
+            if maximal and not _report(v, clique, level + 1, universe, members, ends, pairs, bound):
+                return False
+            continue
+        level += 1
+        cand[level], excl[level] = next_cand, next_excl
+        todo[level] = next_cand & ~adj[_pivot(next_cand, next_excl, adj)]
+    return True
+
+
+@numba.njit(cache=True, nogil=True)
+def _report(
+    v: int,
+    clique: np.ndarray,
+    size: int,
+    universe: np.ndarray,
+    members: List,
+    ends: List,
+    pairs: np.ndarray,
+    bound: int,
+) -> bool:
+    """Record the clique of v and ``clique[:size]``; False if it exceeds the bound."""
+    pairs[0] += (size + 1) * size // 2
+    if 0 <= bound < pairs[0]:
+        return False
+    members.append(v)
+    for k in range(size):
+        members.append(universe[clique[k]])
+    ends.append(len(members))
+    return True
+
+
+@numba.njit(cache=True, nogil=True)
+def _pivot(cand: np.ndarray, excl: np.ndarray, adj: np.ndarray) -> int:
+    """The vertex of ``cand | excl`` with the most neighbours among ``cand`` (Tomita)."""
+    pivot, best = -1, -1
+    for w in range(cand.size):
+        pool = cand[w] | excl[w]
+        while pool:
+            low = pool & (~pool + np.uint64(1))
+            u = w * 64 + _bit_index(low)
+            pool ^= low
+            count = 0
+            for x in range(cand.size):
+                count += _popcount(cand[x] & adj[u, x])
+            if count > best:
+                pivot, best = u, count
+    return pivot
+
+
+@numba.njit(cache=True, nogil=True)
+def _first_bit(bits: np.ndarray) -> int:
+    """Index of the lowest set bit of a bitset (W,), -1 if none."""
+    for w in range(bits.size):
+        if bits[w]:
+            return w * 64 + _bit_index(bits[w] & (~bits[w] + np.uint64(1)))
+    return -1
+
+
+@numba.njit(cache=True, nogil=True)
+def _all_bits(d: int, words: int) -> np.ndarray:
+    """(W,) the bitset of indices 0..d-1."""
+    out = np.zeros(words, dtype=np.uint64)
+    for k in range(d):
+        out[k // 64] |= np.uint64(1) << np.uint64(k % 64)
+    return out
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _popcount(x: np.uint64) -> int:
+    count = 0
+    while x:
+        x &= x - np.uint64(1)
+        count += 1
+    return count
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _bit_index(low: np.uint64) -> int:
+    """Index of the one set bit of ``low``."""
+    k = 0
+    while low > np.uint64(1):
+        low >>= np.uint64(1)
+        k += 1
+    return k
+
+
+@numba.njit(cache=True, nogil=True)
+def _degeneracy_rank(start: np.ndarray, neighbours: np.ndarray) -> np.ndarray:
+    """(V,) each vertex's position when repeatedly removing a vertex of least remaining
+    degree (Batagelj-Zaversnik bucket queue, O(V + E))."""
+    n = start.size - 1
+    degree = start[1:] - start[:-1]
+    bucket = np.zeros(n + 2, dtype=np.int64)  # where each degree's bucket starts
+    for v in range(n):
+        bucket[degree[v] + 1] += 1
+    bucket = np.cumsum(bucket)
+    order = np.empty(n, dtype=np.int64)  # vertices by current degree
+    where = np.empty(n, dtype=np.int64)  # each vertex's place in order
+    fill = bucket.copy()
+    for v in range(n):
+        where[v] = fill[degree[v]]
+        order[where[v]] = v
+        fill[degree[v]] += 1
+    rank = np.empty(n, dtype=np.int64)
+    for k in range(n):
+        v = order[k]
+        rank[v] = k
+        for u in neighbours[start[v] : start[v + 1]]:
+            du = degree[u]
+            if du > degree[v]:  # u moves to the front of its bucket, then one bucket down
+                first = max(bucket[du], k + 1)
+                w = order[first]
+                if w != u:
+                    order[where[u]], order[first] = w, u
+                    where[w], where[u] = where[u], first
+                bucket[du] = first + 1
+                degree[u] = du - 1
+    return rank
 
 
 def _incidences(problem: Problem, groups: list[list[int]]) -> tuple[np.ndarray, np.ndarray]:

@@ -4,10 +4,13 @@ from __future__ import annotations
 
 from typing import Any
 
+import networkx as nx
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from service.core.cliques import Cliques, budget_for, find_cliques
+from service.core.cliques import Cliques, _maximal_cliques, budget_for, find_cliques
 from service.core.problem import Problem, problem_from_request
 from service.core.schemas import ScheduleRequest
 from service.learning.generate import small_problem
@@ -107,3 +110,44 @@ def test_cliques_equal_brute_force(seed: int) -> None:
     assert cl.start[0] == 0 and cl.start[-1] == cl.edge.size
     assert np.all(cl.size >= 1)
     assert _groups(cl) == set(density_groups(reference_problem(req)))
+
+
+@st.composite
+def graphs(draw: st.DrawFn) -> tuple[int, list[tuple[int, int]]]:
+    """A random simple graph: n vertices, each pair an edge with probability p."""
+    n = draw(st.integers(2, 40))
+    p = draw(st.sampled_from([0.05, 0.15, 0.3, 0.5]))
+    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+    return n, [(i, j) for i in range(n) for j in range(i + 1, n) if rng.random() < p]
+
+
+def _csr(n: int, edges: list[tuple[int, int]]) -> tuple[np.ndarray, np.ndarray]:
+    a = np.array([e[k] for k in (0, 1) for e in edges], dtype=np.int64)
+    b = np.array([e[1 - k] for k in (0, 1) for e in edges], dtype=np.int64)
+    order = np.lexsort((b, a))
+    return np.searchsorted(a[order], np.arange(n + 1)), b[order]
+
+
+@settings(max_examples=150, deadline=None, derandomize=True)
+@given(graph=graphs())
+def test_maximal_cliques_equal_networkx(graph: tuple[int, list[tuple[int, int]]]) -> None:
+    n, edges = graph
+    members, ends, complete = _maximal_cliques(*_csr(n, edges), -1)
+    flat, bounds = list(members), [0, *ends]
+    ours = [frozenset(flat[lo:hi]) for lo, hi in zip(bounds[:-1], bounds[1:], strict=True)]
+    reference = {frozenset(c) for c in nx.find_cliques(nx.Graph(edges))} if edges else set()
+    assert complete and len(ours) == len(set(ours)) and set(ours) == reference
+
+
+@settings(max_examples=40, deadline=None, derandomize=True)
+@given(graph=graphs())
+def test_the_bound_stops_exactly_above_the_cliques_pairs(
+    graph: tuple[int, list[tuple[int, int]]],
+) -> None:
+    n, edges = graph
+    csr = _csr(n, edges)
+    pairs = (
+        sum(len(c) * (len(c) - 1) // 2 for c in nx.find_cliques(nx.Graph(edges))) if edges else 0
+    )
+    assert _maximal_cliques(*csr, pairs)[2]
+    assert not _maximal_cliques(*csr, pairs - 1)[2] or pairs == 0
