@@ -171,8 +171,9 @@ def _maximal_cliques(
     rank = _degeneracy_rank(start, neighbours)  # (V,) position in degeneracy order
     members = List.empty_list(types.int64)
     ends = List.empty_list(types.int64)
-    local = np.full(n, -1, dtype=np.int64)  # (V,) vertex -> its index among v's neighbours
     pairs = np.zeros(1, dtype=np.int64)  # vertex pairs inside the cliques so far
+    sink = (members, ends, pairs)  # where the cliques go (:func:`_report`)
+    local = np.full(n, -1, dtype=np.int64)  # (V,) vertex -> its index among v's neighbours
     for v in np.argsort(rank):
         universe = neighbours[start[v] : start[v + 1]]  # (d,) v's neighbours
         d = universe.size
@@ -191,7 +192,7 @@ def _maximal_cliques(
         for k in range(d):
             if rank[universe[k]] > rank[v]:
                 later[k // 64] |= np.uint64(1) << np.uint64(k % 64)
-        complete = _cliques_through(v, later, adj, universe, members, ends, pairs, bound)
+        complete = _cliques_through(v, later, adj, universe, sink, bound)
         for k in range(d):
             local[universe[k]] = -1
         if not complete:
@@ -205,9 +206,7 @@ def _cliques_through(
     later: np.ndarray,
     adj: np.ndarray,
     universe: np.ndarray,
-    members: List,
-    ends: List,
-    pairs: np.ndarray,
+    sink: tuple[List, List, np.ndarray],
     bound: int,
 ) -> bool:
     """The maximal cliques holding v and, otherwise, only v's ``later`` neighbours:
@@ -245,7 +244,7 @@ def _cliques_through(
         next_excl = excl[level] & adj[u]
         if not next_cand.any():
             maximal = not next_excl.any()
-            if maximal and not _report(v, clique, level + 1, universe, members, ends, pairs, bound):
+            if maximal and not _report(v, clique, level + 1, universe, sink, bound):
                 return False
             continue
         level += 1
@@ -260,12 +259,12 @@ def _report(
     clique: np.ndarray,
     size: int,
     universe: np.ndarray,
-    members: List,
-    ends: List,
-    pairs: np.ndarray,
+    sink: tuple[List, List, np.ndarray],
     bound: int,
 ) -> bool:
-    """Record the clique of v and ``clique[:size]``; False if it exceeds the bound."""
+    """Record the clique of v and ``clique[:size]`` in ``sink`` (members, clique ends,
+    vertex pairs so far); False if that exceeds the bound."""
+    members, ends, pairs = sink
     pairs[0] += (size + 1) * size // 2
     if 0 <= bound < pairs[0]:
         return False
