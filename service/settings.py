@@ -75,8 +75,11 @@ class Settings(BaseSettings):
     # Work bound of the clique enumeration (413 above it): conflicts summed over the maximal
     # cliques. Complete multipartite conflict graphs have exponentially many cliques; a
     # sparse graph has about one incidence per conflict (5,000 robots, 100,000 conflicts:
-    # 102,512). Measured at 327,680 (5 robots x 8 nodes, all conflicting): solves overran a
-    # 5 s limit by up to 2.6 s; at 1,000,000 by 7.7 s.
+    # 102,512). Measured at 327,680 (5 robots x 8 nodes, all conflicting, 32,768 cliques):
+    # solves overran a 5 s limit by up to 2.6 s; at 1,000,000 by 7.7 s. With the compiled
+    # enumeration (2026-11-24) auto keeps 5 s at 327,680 (4.0 s) and overruns by 1.5 s at
+    # 1,000,000 (100,000 cliques); 250-robot warehouses hold up to 936,000 in 209 cliques
+    # and keep their limits: the cost follows the number of cliques (docs/paths.md).
     max_clique_incidences: int = Field(default=250_000, ge=1)
     # Paths form (docs/paths.md): pieces of at most this many metres (sections and following
     # gaps are conservative by up to this much) and this much clearance kept between
