@@ -112,10 +112,10 @@ class Execution:
         self, paths: Sequence[RobotPath], plan: DependencyPlan, rates: Sequence[Rate] | None = None
     ):
         self.paths = paths
-        self.rates = list(rates) if rates is not None else [Rate()] * len(paths)
+        rates = list(rates) if rates is not None else [Rate()] * len(paths)
         self.now = -np.inf  # wall time the run has been advanced to
         start = np.array([p.start_time for p in paths], dtype=np.float64)  # (R,)
-        pieces = np.array([rate.value.size for rate in self.rates], dtype=np.int64)  # (R,)
+        pieces = np.array([rate.value.size for rate in rates], dtype=np.int64)  # (R,)
         none = DependencyPlan.empty()  # placeholders until the plan is loaded
         self.loop = Loop(
             clock=start.copy(),
@@ -127,8 +127,8 @@ class Execution:
             started=np.zeros(len(paths), dtype=bool),
             done=np.zeros(len(paths), dtype=bool),
             rate_start=np.concatenate([[0], np.cumsum(pieces + 1)]),
-            rate_edge=np.concatenate([r.edges for r in self.rates]),
-            rate_value=np.concatenate([np.append(r.value, 1.0) for r in self.rates]),
+            rate_edge=np.concatenate([r.edges for r in rates]),
+            rate_value=np.concatenate([np.append(r.value, 1.0) for r in rates]),
             **_constraints(len(paths), none.waiter, none.wait_s, none.waitee, none.until_s),
             event_wall=np.zeros(len(paths)),
             event_clock=np.zeros(len(paths)),
