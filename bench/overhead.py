@@ -13,9 +13,9 @@ a second"). Around it, the wire: parsing the JSON body into a request and
 serializing the answer, timed too but not part of the overhead.
 
 It also says whether the service's default work bounds would refuse the world
-(413, ``SCHEDULER_MAX_CLIQUE_INCIDENCES``): such worlds are planned without the
-bound so that their timings are still measured. Under ``--out``: ``tables.md``,
-``results.json`` / ``results.csv`` and ``overhead.png``.
+(413, ``SCHEDULER_MAX_CLIQUES`` / ``SCHEDULER_MAX_CLIQUE_INCIDENCES``): such worlds
+are planned without the bounds so that their timings are still measured. Under
+``--out``: ``tables.md``, ``results.json`` / ``results.csv`` and ``overhead.png``.
 """
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ from bench.report import (
     plot_lines,
     write_results,
 )
-from service.core.cliques import TooManyCliques, clique_budget
+from service.core.cliques import CliqueBound, TooManyCliques, clique_budget
 from service.core.path_schemas import PathsRequest, PathsScheduleResponse
 from service.geometry.graph import GeometrySettings
 from service.memory import settle
@@ -97,7 +97,7 @@ def resampled(body: dict[str, Any], points: int) -> dict[str, Any]:
 
 
 def plan_once(
-    wire: str, policy: DispatchPolicy, geometry: GeometrySettings, cap: int | None
+    wire: str, policy: DispatchPolicy, geometry: GeometrySettings, cap: CliqueBound
 ) -> tuple[PathsScheduleResponse, float, float]:
     """Parse ``wire`` and plan it under the clique bound ``cap``; the answer, the seconds
     spent parsing, and the seconds spent serializing the answer.
@@ -127,12 +127,14 @@ def measure_world(
         cfg.points,
     )
     wire = json.dumps(body)
-    geometry, cap = GeometrySettings(), Settings().max_clique_incidences
+    settings = Settings()
+    geometry = GeometrySettings()
+    cap = CliqueBound(settings.max_cliques, settings.max_clique_incidences)
     try:
         plan_once(wire, policy, geometry, cap)
         refused = False
     except TooManyCliques:
-        refused, cap = True, None
+        refused, cap = True, CliqueBound()
     runs = [plan_once(wire, policy, geometry, cap) for _ in range(cfg.repeats)]
     timings = {
         "graph_s": [a.timings.graph_s for a, _, _ in runs],
@@ -163,7 +165,7 @@ def run(cfg: Config, progress: bool = True) -> dict[str, Any]:
     """Measure every world; return everything that gets written."""
     policy = DispatchPolicy()
     warm = resampled(generate("wh_two_way", 10, 10_000).to_request(cfg.objective), cfg.points)
-    plan_once(json.dumps(warm), policy, GeometrySettings(), None)  # compiling is not timed
+    plan_once(json.dumps(warm), policy, GeometrySettings(), CliqueBound())  # not timed: compiling
     settle()  # as the service does once it has warmed up
     cases = [
         (kind, n, cfg.base_seed + i)

@@ -72,15 +72,20 @@ class Settings(BaseSettings):
     # Intra-op threads of torch per process (None: cores / solve_concurrency, at least 1),
     # so concurrent solves do not oversubscribe the cores.
     torch_threads: int | None = Field(default=None, ge=1)
-    # Work bound of the clique enumeration (413 above it): conflicts summed over the maximal
-    # cliques. Complete multipartite conflict graphs have exponentially many cliques; a
-    # sparse graph has about one incidence per conflict (5,000 robots, 100,000 conflicts:
-    # 102,512). Measured at 327,680 (5 robots x 8 nodes, all conflicting, 32,768 cliques):
-    # solves overran a 5 s limit by up to 2.6 s; at 1,000,000 by 7.7 s. With the compiled
-    # enumeration (2026-11-24) auto keeps 5 s at 327,680 (4.0 s) and overruns by 1.5 s at
-    # 1,000,000 (100,000 cliques); 250-robot warehouses hold up to 936,000 in 209 cliques
-    # and keep their limits: the cost follows the number of cliques (docs/paths.md).
-    max_clique_incidences: int = Field(default=250_000, ge=1)
+    # Work bounds of the clique enumeration (413 above either): maximal cliques of the
+    # conflict graph, and conflicts summed over them. Complete multipartite conflict graphs
+    # have exponentially many; what a solve costs beyond its time limit follows both
+    # (each clique is a density constraint, each conflict in it a term). Measured
+    # (2026-11-24, auto, no bound; complete multipartite k robots x n nodes): 4 x 10
+    # (10,000 cliques, 60,000 conflicts in them) kept 0.5-5 s limits within 0.12 s;
+    # 5 x 7 (16,807; 168,070) and 7 x 4 (16,384; 344,064) overran 0.5 s limits by 0.3-0.5 s
+    # before the enumeration's output and CP-SAT's density constraints were sped up;
+    # 9 x 3 (19,683; 708,588) by 0.9 s. Realistic graphs have few, large cliques: 250-robot
+    # warehouses hold up to 936,000 conflicts in 209 cliques and keep their limits, and a
+    # sparse graph has about one conflict per clique (5,000 robots, 100,000 conflicts:
+    # 102,512 in as many cliques).
+    max_cliques: int = Field(default=20_000, ge=1)
+    max_clique_incidences: int = Field(default=2_000_000, ge=1)
     # Paths form (docs/paths.md): pieces of at most this many metres (sections and following
     # gaps are conservative by up to this much) and this much clearance kept between
     # footprints beyond their radii; caps on path points (413 above them) and on the

@@ -14,7 +14,7 @@ from anyio import CapacityLimiter, WouldBlock, to_thread
 
 from service.api.errors import InvalidProblem, Saturated, TooLarge
 from service.api.request_log import RequestRecord
-from service.core.cliques import TooManyCliques, clique_budget
+from service.core.cliques import CliqueBound, TooManyCliques, clique_budget
 from service.core.path_schemas import PathsRequest
 from service.core.problem import ProblemError
 from service.core.schemas import OBJECTIVES, OptionsIn, ScheduleRequest
@@ -76,12 +76,12 @@ class SolvePool:
     """
 
     def __init__(
-        self, slots: int, queue_size: int, retry_after_s: int, max_clique_incidences: int
+        self, slots: int, queue_size: int, retry_after_s: int, clique_bound: CliqueBound
     ) -> None:
         self.slots = CapacityLimiter(slots)
         self.queue_size = queue_size
         self.retry_after_s = retry_after_s
-        self.max_clique_incidences = max_clique_incidences
+        self.clique_bound = clique_bound
         self.waiting = 0
 
     @property
@@ -131,7 +131,7 @@ class SolvePool:
 
     def _bounded(self, work: Callable[[], T]) -> T:
         """``work()`` within the clique budget (in the worker thread's own context)."""
-        with clique_budget(self.max_clique_incidences):
+        with clique_budget(self.clique_bound):
             return work()
 
 
@@ -179,7 +179,7 @@ def build_runtime(settings: Settings) -> Runtime:
         settings.solve_concurrency,
         settings.queue_size,
         settings.retry_after_s,
-        settings.max_clique_incidences,
+        CliqueBound(settings.max_cliques, settings.max_clique_incidences),
     )
     cores_per_solve = max(1, (os.cpu_count() or 1) // settings.solve_concurrency)
     return Runtime(

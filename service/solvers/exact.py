@@ -57,6 +57,7 @@ __all__ = [
     "ExactResult",
     "Tuning",
     "build_model",
+    "build_seconds",
     "exact",
     "improve",
     "search",
@@ -128,8 +129,13 @@ class ExactModel:
 
 # The least search time CP-SAT gets when building its model used up the time limit.
 MIN_SEARCH_S = 0.001
-# Building the model, measured: 36 ms at 262 conflicts, 2.5 s at 21,835 (~120 us each).
+# Building the model, measured: 36 ms at 262 conflicts, 2.5 s at 21,835 (~120 us each),
+# plus its density constraints: 0.25-0.57 s for 16,384-46,656 binding cliques holding
+# 327,680-708,588 conflicts (complete multipartite graphs), ~8 us per clique and
+# ~0.5 us per conflict in it.
 BUILD_S_PER_CONFLICT = 1.2e-4
+BUILD_S_PER_CLIQUE = 8e-6
+BUILD_S_PER_INCIDENCE = 5e-7
 
 
 @dataclass(frozen=True)
@@ -160,6 +166,16 @@ def time_scale(problem: Problem) -> float:
             return scale
         scale *= 10.0
     return cap
+
+
+def build_seconds(problem: Problem, cliques: Cliques) -> float:
+    """About how long :func:`build_model` takes on this machine (measured rates above)."""
+    binding = cliques.binding()
+    return (
+        BUILD_S_PER_CONFLICT * problem.n_conflicts
+        + BUILD_S_PER_CLIQUE * int(binding.sum())
+        + BUILD_S_PER_INCIDENCE * int(cliques.size[binding].sum())
+    )
 
 
 def build_model(problem: Problem, cliques: Cliques, objective: Objective) -> ExactModel:
@@ -223,15 +239,14 @@ def _fix_directions(
 
 
 def _add_density(model: cp_model.CpModel, cliques: Cliques, following: list) -> None:
-    """At most h_K following-type conflicts in each clique whose budget can bind."""
-    for q in range(cliques.budget.size):
-        members = cliques.edge[cliques.start[q] : cliques.start[q + 1]].tolist()
-        budget = int(cliques.budget[q])
-        if budget <= 0:
-            for c in members:
-                model.add(following[c] == 0)
-        elif budget < len(members):
-            model.add(sum(following[c] for c in members) <= budget)
+    """Conflicts of a zero-budget clique exclusive (once each), and at most h_K
+    following-type conflicts in each clique whose positive budget can bind."""
+    for c in np.flatnonzero(cliques.forbidden()).tolist():
+        model.add(following[c] == 0)
+    edge, start, budget = cliques.edge.tolist(), cliques.start.tolist(), cliques.budget.tolist()
+    for q in np.flatnonzero(cliques.binding()).tolist():
+        terms = [following[c] for c in edge[start[q] : start[q + 1]]]
+        model.add(cp_model.LinearExpr.sum(terms) <= budget[q])
 
 
 def _time_slots(
@@ -378,7 +393,7 @@ def solve(
 ) -> ExactResult | None:
     """Best assignment CP-SAT finds within the time limit (None if it found none).
 
-    The time limit counts from the call: building the model (~120 us per conflict)
+    The time limit counts from the call: building the model (:func:`build_seconds`)
     is part of it, and CP-SAT searches for what is left (at least MIN_SEARCH_S).
     ``on_solution`` (optional) sees every improving solution with its wall time,
     e.g. for measuring how fast CP-SAT reaches a given cost; ``tuning`` sets further

@@ -13,7 +13,7 @@ comes first, improving in stages:
    budget; it proves optimality where it can (``solver.optimal`` is true only
    then) and never returns worse than its hint (the cheaper is kept, by the one
    evaluator). It is skipped when building its model alone would not fit in
-   what is left (~120 us per conflict), and above ``exact_stage_max_conflicts``
+   what is left (``exact.build_seconds``), and above ``exact_stage_max_conflicts``
    (where it was measured to improve nothing within seconds); the first stage then
    gets the whole budget, and tabu search polishes its answer with what it leaves.
 
@@ -40,7 +40,7 @@ import numpy as np
 
 from service.core.assignment import Assignments
 from service.core.decompose import DECOMPOSABLE, Part, join, parts
-from service.solvers.exact import BUILD_S_PER_CONFLICT, improve
+from service.solvers.exact import build_seconds, improve
 from service.solvers.registry import SolveContext, SolverOutput, get_solver, register
 from service.solvers.tabu import plain_start, tabu_search
 
@@ -93,7 +93,7 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
         return replace(best, optimal=True, detail="no conflict")
     cost = _cost(ctx, best.assignment)
     too_large = problem.n_conflicts > ctx.exact_stage_max_conflicts  # for CP-SAT to help
-    build_s = np.inf if too_large else 2 * BUILD_S_PER_CONFLICT * problem.n_conflicts
+    build_s = np.inf if too_large else 2 * build_seconds(problem, ctx.cliques)
     if problem.n_conflicts > ctx.exact_max_conflicts:
         first = "tabu" if ctx.warm is not None else ctx.first_stage
         left = deadline - time.monotonic()

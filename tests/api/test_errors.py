@@ -277,12 +277,16 @@ async def test_a_conflict_graph_with_too_many_cliques_is_413_in_time(
     start = time.monotonic()
     response = await post_json(client, request)
     assert response.status_code == 413, response.text
-    assert "more than 250000 conflicts in all (max_clique_incidences)" in response.json()["detail"]
+    assert "more than 20000 maximal cliques (max_cliques)" in response.json()["detail"]
     assert time.monotonic() - start < 5.0  # refused long before its time limit
 
 
-async def test_the_clique_budget_is_a_setting(serve: Serve) -> None:
+async def test_the_clique_bounds_are_settings(serve: Serve) -> None:
     async with serve(Settings(max_clique_incidences=2)) as client:
         response = await post_json(client, multipartite(3, 1))  # one clique of 3 conflicts
     assert response.status_code == 413
     assert "more than 2 conflicts in all (max_clique_incidences)" in response.json()["detail"]
+    async with serve(Settings(max_cliques=7)) as client:
+        response = await post_json(client, multipartite(3, 2))  # 2^3 = 8 cliques
+    assert response.status_code == 413
+    assert "more than 7 maximal cliques (max_cliques)" in response.json()["detail"]

@@ -10,6 +10,7 @@ import pytest
 from pydantic import ValidationError
 
 from service.api.runtime import build_runtime, dispatch_policy
+from service.core.cliques import CliqueBound
 from service.settings import MIB, Settings, get_settings
 from service.solvers.dispatch import DispatchPolicy
 
@@ -45,6 +46,7 @@ def test_environment_overrides(monkeypatch: pytest.MonkeyPatch) -> None:
         ("retry_after_s", 0),
         ("torch_threads", 0),
         ("max_clique_incidences", 0),
+        ("max_cliques", 0),
         ("large_solver", "auto"),
         ("log_level", "loud"),
     ],
@@ -71,10 +73,13 @@ def test_reading_settings_imports_nothing_heavy() -> None:
 
 
 def test_runtime_follows_settings() -> None:
-    s = Settings(solve_concurrency=3, queue_size=5, retry_after_s=7, max_clique_incidences=99)
+    s = Settings(
+        solve_concurrency=3, queue_size=5, retry_after_s=7, max_cliques=98, max_clique_incidences=99
+    )
     runtime = build_runtime(s)
     pool = runtime.limiter
-    assert (pool.queue_size, pool.retry_after_s, pool.max_clique_incidences) == (5, 7, 99)
+    assert (pool.queue_size, pool.retry_after_s) == (5, 7)
+    assert pool.clique_bound == CliqueBound(cliques=98, incidences=99)
     assert pool.slots.total_tokens == 3
     assert runtime.torch_threads == max(1, (os.cpu_count() or 1) // 3)
     assert build_runtime(Settings(torch_threads=5)).torch_threads == 5

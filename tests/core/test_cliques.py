@@ -10,11 +10,27 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from service.core.cliques import Cliques, _maximal_cliques, budget_for, find_cliques
+from service.core import cliques as module
+from service.core.cliques import (
+    CliqueBound,
+    Cliques,
+    TooManyCliques,
+    _maximal_cliques,
+    budget_for,
+    clique_budget,
+    find_cliques,
+)
 from service.core.problem import Problem, problem_from_request
 from service.core.schemas import ScheduleRequest
 from service.learning.generate import small_problem
 from tests.reference import density_groups, reference_problem, tiny_request
+
+NO_LIMITS = np.array([-1, -1])
+COMPLETE, OVER_INCIDENCES, OVER_CLIQUES = (
+    module._COMPLETE,
+    module._OVER_INCIDENCES,
+    module._OVER_CLIQUES,
+)
 
 
 def _problem(req: dict[str, Any]) -> Problem:
@@ -132,22 +148,63 @@ def _csr(n: int, edges: list[tuple[int, int]]) -> tuple[np.ndarray, np.ndarray]:
 @given(graph=graphs())
 def test_maximal_cliques_equal_networkx(graph: tuple[int, list[tuple[int, int]]]) -> None:
     n, edges = graph
-    members, ends, complete = _maximal_cliques(*_csr(n, edges), -1)
-    flat, bounds = list(members), [0, *ends]
+    members, ends, status = _maximal_cliques(*_csr(n, edges), NO_LIMITS)
+    flat, bounds = members.tolist(), [0, *ends.tolist()]
     ours = [frozenset(flat[lo:hi]) for lo, hi in zip(bounds[:-1], bounds[1:], strict=True)]
     reference = {frozenset(c) for c in nx.find_cliques(nx.Graph(edges))} if edges else set()
-    assert complete and len(ours) == len(set(ours)) and set(ours) == reference
+    assert status == COMPLETE and len(ours) == len(set(ours)) and set(ours) == reference
 
 
 @settings(max_examples=40, deadline=None, derandomize=True)
 @given(graph=graphs())
-def test_the_bound_stops_exactly_above_the_cliques_pairs(
+def test_the_bounds_stop_exactly_above_the_cliques_pairs_and_count(
     graph: tuple[int, list[tuple[int, int]]],
 ) -> None:
     n, edges = graph
     csr = _csr(n, edges)
-    pairs = (
-        sum(len(c) * (len(c) - 1) // 2 for c in nx.find_cliques(nx.Graph(edges))) if edges else 0
+    cliques = list(nx.find_cliques(nx.Graph(edges))) if edges else []
+    pairs = sum(len(c) * (len(c) - 1) // 2 for c in cliques)
+
+    def status(incidences: int, count: int) -> int:
+        return int(_maximal_cliques(*csr, np.array([incidences, count]))[2])
+
+    assert status(pairs, len(cliques)) == COMPLETE
+    if cliques:
+        assert status(pairs - 1, -1) == OVER_INCIDENCES
+        assert status(-1, len(cliques) - 1) == OVER_CLIQUES
+
+
+def test_find_cliques_names_the_bound_it_exceeds() -> None:
+    # Complete tripartite, 3 nodes per robot: 27 maximal cliques of 3 conflicts each.
+    problem = _problem(
+        {
+            "robots": [
+                {
+                    "id": f"r{i}",
+                    "nodes": [
+                        {"id": f"r{i}/{k}", "enter": 3.0 * k, "exit": 3.0 * k + 1, "density": 2}
+                        for k in range(3)
+                    ],
+                }
+                for i in range(3)
+            ],
+            "conflicts": [
+                {"a": f"r{i}/{a}", "b": f"r{j}/{b}"}
+                for i in range(3)
+                for j in range(i + 1, 3)
+                for a in range(3)
+                for b in range(3)
+            ],
+        }
     )
-    assert _maximal_cliques(*csr, pairs)[2]
-    assert not _maximal_cliques(*csr, pairs - 1)[2] or pairs == 0
+    with clique_budget(CliqueBound(cliques=27, incidences=81)):
+        assert find_cliques(problem).budget.size == 27
+    with clique_budget(CliqueBound(cliques=26)), pytest.raises(TooManyCliques) as many:
+        find_cliques(problem)
+    assert many.value.setting == "max_cliques"
+    assert "more than 26 maximal cliques (max_cliques)" in str(many.value)
+    with clique_budget(CliqueBound(incidences=80)), pytest.raises(TooManyCliques) as held:
+        find_cliques(problem)
+    assert held.value.setting == "max_clique_incidences"
+    assert "hold more than 80 conflicts in all (max_clique_incidences)" in str(held.value)
+    assert find_cliques(problem).budget.size == 27  # unbounded outside the context
