@@ -14,7 +14,14 @@ touching. A schedule that keeps every pair out of its boxes' interiors never
 lets two disks overlap (the argument is in docs/paths.md).
 
 Resolution only coarsens the arc lengths of robot i (the lower index) by up to
-``resolution``; robot j's are exact.
+``resolution``; robot j's are exact. Where segment A stays within reach of the same
+segments of other robots (a shared corridor), consecutive pieces run together into
+one piece of up to COARSE_PIECE_M: its box is the union of theirs in both extents
+(the stretch of a longer piece is the union of its parts' stretches), so nodes,
+sections and pair times are the same as at full resolution; only a following
+staircase over such a stretch has steps of up to COARSE_PIECE_M, which the
+dependency plan makes anyway (``STAIRCASE_STEP_M``). A 250-robot one-way warehouse
+then has 0.5 M boxes instead of 1.7 M.
 """
 
 from __future__ import annotations
@@ -39,6 +46,10 @@ STRAIGHT_TOL = 1e-9
 # Stretches of one piece on consecutive segments of a path touch at the shared vertex,
 # equal up to rounding; closer than this (metres) they merge into one box.
 MERGE_TOL = 1e-9
+# Longest piece, metres, where a segment stays within reach of the same segments: the
+# following staircase's step (``motion.dependencies.STAIRCASE_STEP_M``), so that runs
+# of fine pieces along shared corridors make one box each.
+COARSE_PIECE_M = 1.0
 # Segments queried per STRtree call, so a runaway candidate count is caught early.
 QUERY_CHUNK = 4096
 
@@ -228,6 +239,7 @@ def _narrow_phase(
     cos: np.ndarray,  # (C,) float, cosine between the two segments' headings
     cos_same: float,
     resolution: float,
+    coarse: int,
     max_boxes: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]:
     # -> per box: segment a (B,), robot j (B,), (4, B) [x0, x1, y0, y1], (2, B)
@@ -252,12 +264,22 @@ def _narrow_phase(
             g_end += 1
         n_pieces = max(1, int(np.ceil(length[a] / resolution)))
         dx, dy = p1[a, 0] - p0[a, 0], p1[a, 1] - p0[a, 1]
-        for k in range(near_first[g:g_end].min(), near_end[g:g_end].max()):
-            f0, f1 = k / n_pieces, (k + 1) / n_pieces
+        # Runs of up to ``coarse`` pieces, cut wherever a candidate's near range starts or
+        # ends, so that each run lies wholly inside or outside every candidate's range,
+        # and around the range's first and last piece, which may miss the candidate (the
+        # range is rounded out to whole pieces) and so must not widen a run's box.
+        first, end = near_first[g:g_end], near_end[g:g_end]
+        cuts = np.sort(np.concatenate((first, first + 1, end - 1, end)))
+        k, k_end, next_cut = first.min(), end.max(), 0
+        while k < k_end:
+            while cuts[next_cut] <= k:
+                next_cut += 1
+            k_next = min(k + coarse, cuts[next_cut])  # the last cut is k_end
+            f0, f1 = k / n_pieces, k_next / n_pieces
             qx0, qy0 = p0[a, 0] + f0 * dx, p0[a, 1] + f0 * dy
             qx1, qy1 = p1[a, 0], p1[a, 1]
             x0, x1 = s0[a] + f0 * length[a], s0[a] + length[a]
-            if k < n_pieces - 1:
+            if k_next < n_pieces:
                 qx1, qy1 = p0[a, 0] + f1 * dx, p0[a, 1] + f1 * dy
                 x1 = s0[a] + f1 * length[a]
             # The stretch being built: robot j (-1: none yet), [y0, y1], flags. The pass
@@ -289,6 +311,7 @@ def _narrow_phase(
                 if c < g_end:
                     j, y0, y1 = seg_robot[b], s0[b] + lo, s0[b] + hi
                     same_way, head_on = cos[c] > cos_same, cos[c] < -cos_same
+            k = k_next
         g = g_end
     return seg[:n], robot[:n], span[:, :n], way[:, :n], n <= max_boxes
 
@@ -328,6 +351,7 @@ def interference_boxes(
         cos,
         float(np.cos(np.radians(CO_DIRECTIONAL_DEG))),
         float(resolution),
+        max(1, int(COARSE_PIECE_M // resolution)),
         max_pairs,
     )
     if not complete:

@@ -32,8 +32,13 @@ __all__ = ["STAIRCASE_STEP_M", "Decision", "dependency_plan", "sections", "stair
 
 # Least distance, metres, between two wait points of one following conflict: a follower
 # then trails at most this much further behind than it must, and a 250-robot plan keeps
-# ~10^4 rather than ~10^5 constraints (executed and sent over the wire).
-STAIRCASE_STEP_M = 1.0
+# ~10^4 rather than ~10^5 constraints (executed and sent over the wire). Below the
+# geometry's coarse pieces (1 m, ``geometry.interference.COARSE_PIECE_M``), so that two
+# of their steps rarely merge into one: on 63 reference worlds (fcfs, executed cost)
+# 0.75 m changed the cost by -0.07 % on average (at most +0.35 %) against 1 m with
+# fine pieces, and kept 7 % more constraints; 1 m with coarse pieces cost +0.10 % (at
+# most +1.45 %), 0.5 m -0.15 % with 19 % more constraints.
+STAIRCASE_STEP_M = 0.75
 # Most wait points one following conflict keeps: a shared stretch longer than this many
 # steps gets longer steps (a kilometre-long corridor must not cost 10^3+ events).
 MAX_STEPS = 100

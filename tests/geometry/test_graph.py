@@ -17,6 +17,7 @@ from pydantic import ValidationError
 from service.core.path_schemas import MAX_ROBOT_ID_LENGTH, PathsRequest
 from service.core.problem import ProblemError, problem_from_request
 from service.core.schemas import MAX_ID_LENGTH, ScheduleRequest
+from service.geometry import interference
 from service.geometry.graph import CoordinationGraph, GeometrySettings, build_graph
 from service.geometry.paths import RobotPath
 from service.motion.plan import coordination_graph
@@ -168,6 +169,51 @@ def test_random_fleets_give_sound_graphs_or_refuse_by_name(robots: list[dict[str
         assert sum(f"'{r['id']}'" in str(err) for r in robots) >= 2
         return
     assert_graph_sound(req, graph)
+
+
+def _graph_arrays(paths: list[RobotPath]) -> dict[str, np.ndarray]:
+    graph = build_graph(paths, SETTINGS)
+    return {
+        "node_robot": graph.node_robot,
+        "node_density": graph.node_density,
+        "conf_node": graph.conf_node,
+        "conf_may_follow": graph.conf_may_follow,
+        "forced": graph.forced,
+        "node_span": graph.node_span,
+        "conf_span": graph.conf_span,
+    }
+
+
+def assert_coarse_pieces_give_the_fine_graph(paths: list[RobotPath]) -> None:
+    """Shared stretches cut in coarse pieces leave nodes, conflicts, densities, fixed
+    orders and pair sections as every piece at the resolution gives them (or the same
+    refusal)."""
+    try:
+        coarse = _graph_arrays(paths)
+    except ProblemError as err:
+        with pytest.MonkeyPatch.context() as m, pytest.raises(ProblemError) as fine_err:
+            m.setattr(interference, "COARSE_PIECE_M", 0.0)
+            _graph_arrays(paths)
+        assert str(fine_err.value) == str(err)
+        return
+    with pytest.MonkeyPatch.context() as m:
+        m.setattr(interference, "COARSE_PIECE_M", 0.0)  # one piece per resolution step
+        fine = _graph_arrays(paths)
+    for name, value in fine.items():
+        np.testing.assert_allclose(coarse[name], value, rtol=0, atol=1e-9, err_msg=name)
+
+
+@settings(max_examples=30, deadline=None, derandomize=True)
+@given(robots=fleets())
+def test_coarse_pieces_give_the_fine_graph_on_random_fleets(robots: list[dict[str, Any]]) -> None:
+    assert_coarse_pieces_give_the_fine_graph(paths_of(request(robots)))
+
+
+@pytest.mark.parametrize("kind", sorted(KINDS))
+@pytest.mark.parametrize("seed", [0, 1])
+def test_coarse_pieces_give_the_fine_graph_on_scenario_worlds(kind: str, seed: int) -> None:
+    req = PathsRequest.model_validate(generate(kind, 40, seed).to_request())
+    assert_coarse_pieces_give_the_fine_graph(paths_of(req))
 
 
 @pytest.mark.parametrize("kind", sorted(KINDS))

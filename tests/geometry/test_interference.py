@@ -17,7 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from service.geometry.graph import GeometrySettings
-from service.geometry.interference import Boxes, interference_boxes
+from service.geometry.interference import COARSE_PIECE_M, Boxes, interference_boxes
 from service.geometry.paths import RobotPath
 from tests.motion.worlds import fleets, paths_of, request, robot
 
@@ -149,10 +149,13 @@ def test_headings_decide_co_direction() -> None:
     assert boxes.size > 0 and boxes.co_directional.all()  # 14 degrees apart
 
 
-def test_boxes_on_side_i_are_no_longer_than_the_resolution() -> None:
+def test_boxes_on_side_i_are_fine_where_reach_begins_and_ends_coarse_between() -> None:
     paths = _paths([robot("a", [[0, 0], [10, 0]]), robot("b", [[0, 0.5], [10, 0.5]])])
     boxes = _boxes(paths, GeometrySettings(resolution=0.3))
-    assert np.all(boxes.x1 - boxes.x0 <= 0.3 + 1e-9)
+    widths = boxes.x1 - boxes.x0
+    assert np.all(widths <= COARSE_PIECE_M + 1e-9)
+    assert widths[0] <= 0.3 + 1e-9 and widths[-1] <= 0.3 + 1e-9  # the range's ends
+    assert widths.max() > 0.3  # the shared stretch between them in coarse pieces
     # The pieces of robot a tile its whole path (all of it is within reach of b).
     pieces = np.unique(np.stack([boxes.x0, boxes.x1], axis=1), axis=0)
     np.testing.assert_allclose(pieces[0, 0], 0.0)
