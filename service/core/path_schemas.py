@@ -9,9 +9,18 @@ coordination graph, and the motion package turns the schedule back into motion.
 from __future__ import annotations
 
 import math
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator, with_config
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    SerializerFunctionWrapHandler,
+    field_serializer,
+    field_validator,
+    model_validator,
+    with_config,
+)
 from typing_extensions import TypedDict
 
 from service.core.schemas import (
@@ -243,6 +252,20 @@ class TimingsOut(BaseModel):
     motion_s: float = Field(description="Dependency plan, execution and clearance check.")
 
 
+# No return annotation on purpose: pydantic would take it for the field's JSON Schema,
+# which must stay the graph-form request's.
+def _graph_as_built(
+    self: BaseModel,
+    graph: ScheduleRequest | dict[str, Any] | None,
+    handler: SerializerFunctionWrapHandler,
+):  # type: ignore[no-untyped-def]
+    """Serialize ``graph`` as built: the service fills it with the graph-form request's
+    plain JSON body (from the graph's arrays, valid by construction; tests validate it
+    and post it back), since validating 23,000 conflicts into models cost 0.06 s of a
+    250-robot answer for nothing. A validated body is written as the model."""
+    return graph if isinstance(graph, dict) else handler(graph)
+
+
 class PathsScheduleResponse(BaseModel):
     """Body of a successful paths-form ``POST /v1/schedules``.
 
@@ -263,6 +286,8 @@ class PathsScheduleResponse(BaseModel):
     dependencies: list[Dependency]
     timings: TimingsOut
 
+    serialize_graph = field_serializer("graph", mode="wrap")(_graph_as_built)
+
 
 class CoordinationGraphResponse(BaseModel):
     """Body of ``POST /v1/coordination-graphs``: the derived graph and where its nodes lie."""
@@ -270,6 +295,8 @@ class CoordinationGraphResponse(BaseModel):
     graph: ScheduleRequest | None
     node_spans: dict[str, tuple[float, float]]
     isolated_robots: list[str]
+
+    serialize_graph = field_serializer("graph", mode="wrap")(_graph_as_built)
 
 
 class DisturbanceIn(BaseModel):

@@ -27,14 +27,21 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
+from typing import Any
 
 import networkx as nx
 import numba
 import numpy as np
 
 from service.core.path_schemas import PathsRequest
-from service.core.problem import ErrorItem, ProblemError
-from service.core.schemas import ScheduleRequest
+from service.core.problem import (
+    DensityLimit,
+    ErrorItem,
+    Problem,
+    ProblemError,
+    problem_from_arrays,
+)
+from service.core.schemas import PreviousConflictIn, ProgressIn, ScheduleRequest
 from service.geometry.interference import Boxes, interference_boxes
 from service.geometry.paths import RobotPath
 
@@ -123,17 +130,30 @@ class CoordinationGraph:
         }
 
     def to_request(self, base: PathsRequest) -> ScheduleRequest | None:
-        """The graph as a graph-form request (objective and options of ``base``); None if empty.
+        """The graph as a validated graph-form request (objective and options of ``base``);
+        None if empty. For callers that post or store it; planning reads :meth:`problem`."""
+        wire = self.to_wire(base)
+        return None if wire is None else ScheduleRequest.model_validate(wire)
+
+    def to_wire(
+        self,
+        base: PathsRequest,
+        previous: list[PreviousConflictIn] | None = None,
+        progress: ProgressIn | None = None,
+    ) -> dict[str, Any] | None:
+        """The graph-form request body (objective and options of ``base``; ``previous``
+        and ``progress`` of a re-schedule) as plain JSON values, every field given as the
+        validated model would write it; None if the graph is empty.
 
         Built in bulk (times by one interpolation per robot and side, ids and dicts from
-        Python lists) and validated once: per-conflict interpolation and numpy scalars
-        cost 0.22 s at 23,000 conflicts, the bulk build 0.02 s. Validation (pydantic-core,
-        0.06 s there) stays: ``model_construct`` measured 2-3x slower than validating.
+        Python lists): per-conflict interpolation and numpy scalars cost 0.22 s at 23,000
+        conflicts, the bulk build 0.02 s. Not validated here (0.06 s more there): it is
+        valid by construction, which the tests check by validating it and posting it.
         """
         if self.node_robot.size == 0:
             return None
         ids = self._node_ids
-        node_times = self._times_at(self.node_robot, self.node_span).tolist()  # (V, 2)
+        node_times = self._node_times.tolist()  # (V, 2)
         density = self.node_density.tolist()
         nodes = [
             {"id": nid, "enter": t0, "exit": t1, "density": d}
@@ -146,28 +166,84 @@ class CoordinationGraph:
                 self.node_robot[bounds[:-1]].tolist(), bounds[:-1], bounds[1:], strict=True
             )
         ]
-        return ScheduleRequest.model_validate(
-            {
-                "objective": base.objective,
-                "robots": robots,
-                "conflicts": self._wire_conflicts(),
-                "density_limits": [
-                    {"nodes": [ids[a], ids[b]], "max_robots": 1} for a, b in self.exclusive_pairs()
-                ],
-                "options": base.options.model_dump(),
-            }
+        return {
+            "objective": base.objective,
+            "robots": robots,
+            "conflicts": self._wire_conflicts(),
+            "density_limits": [
+                {"nodes": [ids[a], ids[b]], "max_robots": 1} for a, b in self.exclusive_pairs()
+            ],
+            "options": base.options.model_dump(mode="json"),
+            "previous": None
+            if previous is None
+            else [p.model_dump(mode="json", by_alias=True) for p in previous],
+            "progress": None if progress is None else progress.model_dump(mode="json"),
+        }
+
+    def problem(self) -> Problem | None:
+        """The graph's :class:`Problem` straight from its arrays (the problem of
+        :meth:`to_request`, without the wire round trip); None if the graph is empty."""
+        if self.node_robot.size == 0:
+            return None
+        robots = self.robots_in_graph()  # (R',) request index of each problem robot
+        local = np.searchsorted(robots, self.node_robot)  # (V,) problem robot of each node
+        conf_a, conf_b = self.conf_node[:, 0].copy(), self.conf_node[:, 1].copy()
+        ids = self._node_ids
+        return problem_from_arrays(
+            robot_ids=tuple(self.paths[r].id for r in robots.tolist()),
+            node_ids=ids,
+            node_robot=local,
+            node_enter=self._node_times[:, 0].copy(),
+            node_exit=self._node_times[:, 1].copy(),
+            node_density=self.node_density.astype(np.int64),
+            goal_time=np.array([self.paths[r].finish_time for r in robots.tolist()]),
+            conf_a=conf_a,
+            conf_b=conf_b,
+            pair_enter=self._pair_times[:, [0, 2]].copy(),
+            pair_exit=self._pair_times[:, [1, 3]].copy(),
+            forced=self.forced.astype(np.int8),
+            density_limits=tuple(
+                DensityLimit(np.array(sorted(pair), dtype=np.int64), 1)
+                for pair in self.exclusive_pairs()
+            ),
         )
 
-    def _wire_conflicts(self) -> list[dict[str, str | float]]:
+    @property
+    def _node_times(self) -> np.ndarray:
+        """(V, 2) planned times at each node's ends."""
+        return self._times[: self.node_robot.size]
+
+    @property
+    def _pair_times(self) -> np.ndarray:
+        """(M, 4) planned times at each conflict's section ends: a enter, a exit, b enter,
+        b exit."""
+        sides = self._times[self.node_robot.size :]  # (2M, 2) side a of each, then side b
+        return np.concatenate([sides[: self.n_conflicts], sides[self.n_conflicts :]], axis=1)
+
+    @cached_property
+    def _times(self) -> np.ndarray:
+        """(V + 2M, 2) planned times at the ends of every node, then of every conflict's
+        section on side a, then on side b: one interpolation per robot for all of them."""
+        side_robot = self.node_robot[self.conf_node]  # (M, 2)
+        robot = np.concatenate([self.node_robot, side_robot[:, 0], side_robot[:, 1]])
+        span = np.concatenate([self.node_span, self.conf_span[:, :2], self.conf_span[:, 2:]])
+        return self._times_at(robot, span)
+
+    def _wire_conflicts(self) -> list[dict[str, str | float | None]]:
         """The conflicts as wire dicts: node ids, section times, ``first`` where fixed."""
         ids = self._node_ids
-        side_robot = self.node_robot[self.conf_node]  # (M, 2)
-        a_times = self._times_at(side_robot[:, 0], self.conf_span[:, :2])  # (M, 2)
-        b_times = self._times_at(side_robot[:, 1], self.conf_span[:, 2:])  # (M, 2)
-        conflicts: list[dict[str, str | float]] = [
-            {"a": ids[a], "b": ids[b], "a_enter": ta0, "a_exit": ta1, "b_enter": tb0, "b_exit": tb1}
-            for (a, b), (ta0, ta1), (tb0, tb1) in zip(
-                self.conf_node.tolist(), a_times.tolist(), b_times.tolist(), strict=True
+        conflicts: list[dict[str, str | float | None]] = [
+            {
+                "a": ids[a],
+                "b": ids[b],
+                "a_enter": ta0,
+                "a_exit": ta1,
+                "b_enter": tb0,
+                "b_exit": tb1,
+                "first": None,
+            }
+            for (a, b), (ta0, ta1, tb0, tb1) in zip(
+                self.conf_node.tolist(), self._pair_times.tolist(), strict=True
             )
         ]
         for m in np.flatnonzero(self.forced).tolist():

@@ -14,6 +14,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -30,7 +31,6 @@ from service.core.schemas import (
     CostsOut,
     NodeTimesOut,
     RobotScheduleOut,
-    ScheduleRequest,
     ScheduleResponse,
     SolverInfoOut,
 )
@@ -49,7 +49,7 @@ from service.simulation.executor import (
     on_clock,
 )
 from service.simulation.simulate import plan_to_wire
-from service.solvers.dispatch import DispatchPolicy, InvalidAnswerError, dispatch
+from service.solvers.dispatch import DispatchPolicy, InvalidAnswerError, dispatch_problem
 
 __all__ = ["MOTION_SHARE", "coordination_graph", "plan_paths"]
 
@@ -86,8 +86,8 @@ def coordination_graph(
 ) -> CoordinationGraphResponse:
     """What ``POST /v1/coordination-graphs`` answers: the graph and its node spans."""
     graph = derive(request, geometry)
-    return CoordinationGraphResponse(
-        graph=graph.to_request(request),
+    return CoordinationGraphResponse.model_construct(
+        graph=graph.to_wire(request),  # its JSON body (see CoordinationGraphResponse)
         node_spans=graph.node_spans(),
         isolated_robots=graph.isolated_robots(),
     )
@@ -118,17 +118,24 @@ def plan_paths(
     due = time.monotonic() + limit if deadline is None else deadline
     graph = derive(request, geometry)
     state = None if request.progress is None else state_of(graph.paths, request.progress)
-    graph_request = _with_progress(graph, graph.to_request(request), request, state)
+    problem = graph.problem()
+    progress = None if state is None or problem is None else progress_at(graph, state)
     graph_done = time.perf_counter()
     answer: ScheduleResponse | None = None
-    if graph_request is not None:
+    if problem is not None:
         solve_due = max(due - MOTION_SHARE * limit, time.monotonic() + MIN_SOLVE_S)
-        answer = dispatch(graph_request, policy, deadline=solve_due)
+        answer = dispatch_problem(
+            problem,
+            request,
+            policy,
+            deadline=solve_due,
+            previous=request.previous,
+            progress=progress,
+        )
     solve_done = time.perf_counter()
     executed = _execute_safely(graph, decision(graph, answer), state)
-    response = _render(
-        request, graph, graph_request, answer, executed, solve_done - graph_done, state
-    )
+    graph_wire = graph.to_wire(request, request.previous, progress)
+    response = _render(request, graph, graph_wire, answer, executed, solve_done - graph_done, state)
     # Motion: everything after the solve, building this answer included.
     response.timings = TimingsOut(
         graph_s=graph_done - start,
@@ -152,21 +159,6 @@ def decision(graph: CoordinationGraph, answer: ScheduleResponse | None) -> Decis
     )
     following = np.array([out["type"] == "following" for out in answer.assignment], dtype=bool)
     return Decision(a_first, following)
-
-
-def _with_progress(
-    graph: CoordinationGraph,
-    graph_request: ScheduleRequest | None,
-    request: PathsRequest,
-    state: State | None,
-) -> ScheduleRequest | None:
-    """The graph request of a re-schedule: ``previous`` and the progress in graph form."""
-    if graph_request is None:
-        return None
-    update: dict[str, object] = {"previous": request.previous}
-    if state is not None:
-        update["progress"] = progress_at(graph, state)
-    return graph_request.model_copy(update=update)
 
 
 def _execute_safely(graph: CoordinationGraph, decision: Decision, state: State | None) -> _Executed:
@@ -194,7 +186,7 @@ def _execute_safely(graph: CoordinationGraph, decision: Decision, state: State |
 def _render(
     request: PathsRequest,
     graph: CoordinationGraph,
-    graph_request: ScheduleRequest | None,
+    graph_wire: dict[str, Any] | None,
     answer: ScheduleResponse | None,
     executed: _Executed,
     solve_s: float,
@@ -243,7 +235,7 @@ def _render(
             collision_free=executed.clearance.ok,
             min_clearance_m=executed.clearance.min_gap,
         ),
-        graph=graph_request,
+        graph=graph_wire,  # its JSON body (see PathsScheduleResponse)
         node_spans=graph.node_spans(),
         trajectories=[
             TrajectoryOut.model_construct(

@@ -13,7 +13,7 @@ import logging
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -29,6 +29,10 @@ from service.core.schemas import (
     ChecksOut,
     CostsOut,
     NodeTimesOut,
+    Objective,
+    OptionsIn,
+    PreviousConflictIn,
+    ProgressIn,
     RobotScheduleOut,
     ScheduleRequest,
     ScheduleResponse,
@@ -56,7 +60,9 @@ __all__ = [
     "LAST_RESORT",
     "DispatchPolicy",
     "InvalidAnswerError",
+    "Job",
     "dispatch",
+    "dispatch_problem",
     "render_reserve",
     "solve_problem",
 ]
@@ -97,6 +103,16 @@ class DispatchPolicy:
     models: Mapping[str, StoredModel] = field(default_factory=dict)  # loaded GNN-VAEs by objective
 
 
+class Job(Protocol):
+    """What a solve reads of its request besides the problem (both request forms have it)."""
+
+    @property
+    def objective(self) -> Objective: ...
+
+    @property
+    def options(self) -> OptionsIn: ...
+
+
 def dispatch(
     request: ScheduleRequest, policy: DispatchPolicy, *, deadline: float | None = None
 ) -> ScheduleResponse:
@@ -113,16 +129,40 @@ def dispatch(
     Raises:
         ProblemError: the request breaks a cross-field rule of the contract.
     """
-    problem = problem_from_request(request)
-    previous = None if request.previous is None else previous_from_wire(problem, request.previous)
-    if request.progress is not None:
-        problem = residual_problem(problem, progress_from_wire(problem, request.progress), previous)
-    return solve_problem(problem, request, policy, deadline=deadline, warm=previous)
+    return dispatch_problem(
+        problem_from_request(request),
+        request,
+        policy,
+        deadline=deadline,
+        previous=request.previous,
+        progress=request.progress,
+    )
+
+
+def dispatch_problem(
+    problem: Problem,
+    job: Job,
+    policy: DispatchPolicy,
+    *,
+    deadline: float | None = None,
+    previous: list[PreviousConflictIn] | None = None,
+    progress: ProgressIn | None = None,
+) -> ScheduleResponse:
+    """:func:`dispatch` for a problem already built (e.g. derived from paths), with the
+    graph-form ``previous`` and ``progress`` of a re-schedule.
+
+    Raises:
+        ProblemError: ``previous`` or ``progress`` contradict the problem.
+    """
+    warm = None if previous is None else previous_from_wire(problem, previous)
+    if progress is not None:
+        problem = residual_problem(problem, progress_from_wire(problem, progress), warm)
+    return solve_problem(problem, job, policy, deadline=deadline, warm=warm)
 
 
 def solve_problem(
     problem: Problem,
-    request: ScheduleRequest,
+    job: Job,
     policy: DispatchPolicy,
     *,
     deadline: float | None = None,
@@ -132,7 +172,7 @@ def solve_problem(
     orientation: OrientationGraph | None = None,
     reserve_s: float | None = None,
 ) -> ScheduleResponse:
-    """Solve a validated ``problem`` with ``request``'s objective and options.
+    """Solve a validated ``problem`` with ``job``'s objective and options.
 
     Args:
         warm: a valid assignment to start local search from (the previous answer of a
@@ -144,10 +184,10 @@ def solve_problem(
         reserve_s: seconds before the deadline at which the solver stops, for checking
             and rendering its answer (default :func:`render_reserve`, a model of that work).
     """
-    opts = request.options
+    opts = job.options
     ctx = SolveContext(
         problem=problem,
-        objective=request.objective,
+        objective=job.objective,
         time_limit_s=max(
             0.0,
             _time_left(opts.time_limit_s or policy.default_time_limit_s, deadline)
@@ -171,7 +211,7 @@ def solve_problem(
     _check_realized_density(problem, ctx.cliques)
     if warm is not None and check(problem, ctx.cliques, warm).ok[0]:
         ctx.warm = warm
-    name = request.options.solver  # "auto" is the anytime portfolio (solvers/portfolio.py)
+    name = opts.solver  # "auto" is the anytime portfolio (solvers/portfolio.py)
     used, output, checks = _first_valid_answer(ctx, name)
     runtime = time.perf_counter() - start
     info = SolverInfoOut(
@@ -190,7 +230,7 @@ def solve_problem(
         density=bool(checks.density[0]),
         forced=bool(checks.forced[0]),
     )
-    return _render(request, ctx, output, info, checked)
+    return _render(job.objective, ctx, output, info, checked)
 
 
 def _check_realized_density(problem: Problem, cliques: Cliques) -> None:
@@ -257,7 +297,7 @@ def _first_valid_answer(ctx: SolveContext, name: str) -> tuple[str, SolverOutput
 
 
 def _render(
-    request: ScheduleRequest,
+    objective: Objective,
     ctx: SolveContext,
     output: SolverOutput,
     info: SolverInfoOut,
@@ -299,8 +339,8 @@ def _render(
     # entries again cost 25 ms of a 250-robot re-schedule.
     return ScheduleResponse.model_construct(
         dependencies=dependency_plan(problem, output.assignment),
-        objective=request.objective,
-        cost=costs[request.objective],
+        objective=objective,
+        cost=costs[objective],
         costs=CostsOut(**costs),
         assignment=assignment,
         schedule=schedule,

@@ -7,6 +7,7 @@ robots drive a section the same way, never where they cross or meet head-on.
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import numpy as np
@@ -169,6 +170,56 @@ def test_random_fleets_give_sound_graphs_or_refuse_by_name(robots: list[dict[str
         assert sum(f"'{r['id']}'" in str(err) for r in robots) >= 2
         return
     assert_graph_sound(req, graph)
+
+
+def assert_problem_is_the_wire_problem(req: PathsRequest, graph: CoordinationGraph) -> None:
+    """The problem built from the graph's arrays equals the one validated from its wire
+    request, field by field."""
+    direct = graph.problem()
+    wire = graph.to_request(req)
+    if wire is None:
+        assert direct is None
+        return
+    assert direct is not None
+    reference = problem_from_request(wire)
+    for f in dataclasses.fields(reference):
+        ours, theirs = getattr(direct, f.name), getattr(reference, f.name)
+        if isinstance(theirs, np.ndarray):
+            assert ours.dtype == theirs.dtype, f.name
+            np.testing.assert_array_equal(ours, theirs, err_msg=f.name)
+        elif f.name == "density_limits":
+            assert [(d.nodes.tolist(), d.max_robots) for d in ours] == [
+                (d.nodes.tolist(), d.max_robots) for d in theirs
+            ]
+        else:
+            assert ours == theirs, f.name
+
+
+@settings(max_examples=30, deadline=None, derandomize=True)
+@given(robots=fleets())
+def test_the_problem_from_arrays_is_the_wire_problem_on_random_fleets(
+    robots: list[dict[str, Any]],
+) -> None:
+    req = request(robots)
+    try:
+        graph = build_graph(paths_of(req), SETTINGS)
+    except ProblemError:
+        return
+    assert_problem_is_the_wire_problem(req, graph)
+
+
+@pytest.mark.parametrize("kind", sorted(KINDS))
+def test_the_problem_from_arrays_is_the_wire_problem_on_scenario_worlds(kind: str) -> None:
+    for seed in range(20):  # the first world of the kind that fixed paths do not refuse
+        req = PathsRequest.model_validate(generate(kind, 20, seed).to_request())
+        try:
+            graph = build_graph(paths_of(req), SETTINGS)
+        except ProblemError:
+            continue
+        assert graph.n_conflicts > 0
+        assert_problem_is_the_wire_problem(req, graph)
+        return
+    pytest.fail(f"every {kind} world of 20 robots was refused")
 
 
 def _graph_arrays(paths: list[RobotPath]) -> dict[str, np.ndarray]:

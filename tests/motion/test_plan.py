@@ -32,6 +32,7 @@ from tests.motion.worlds import (
     assert_motion_valid,
     evaluated,
     fleets,
+    graph_of,
     paths_of,
     plan,
     request,
@@ -246,7 +247,8 @@ def test_a_robot_parked_at_its_start_goes_first() -> None:
     at x ~ 4.2 and may pass only once 'parked' is 0.55 m up its way (t=6.55)."""
     req = request(SCENARIOS["parked_start"]())
     out = plan(req)
-    assert out.graph is not None and out.graph.conflicts[0].first == "b"
+    graph = graph_of(out)
+    assert graph is not None and graph.conflicts[0].first == "b"
     assert out.assignment[0]["from"] == "parked/0"
     done = _completions(out)
     assert done["parked"] == pytest.approx(13.7)  # never waits
@@ -292,7 +294,8 @@ def test_isolated_robots_get_their_planned_motion() -> None:
     req = request(fleet)
     out = plan(req)
     assert_motion_valid(req, out)
-    assert out.graph is not None and "far" not in {r.id for r in out.graph.robots}
+    graph = graph_of(out)
+    assert graph is not None and "far" not in {r.id for r in graph.robots}
     far = wire_trajectories(req, out)[-1]
     np.testing.assert_allclose(far.t, [2.0, 7.0])
     np.testing.assert_allclose(far.xy, [[50, 50], [55, 50]])

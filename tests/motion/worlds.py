@@ -23,8 +23,13 @@ from hypothesis import strategies as st
 
 from service.core.assignment import Assignments
 from service.core.evaluate import Evaluator
-from service.core.path_schemas import PathsRequest, PathsScheduleResponse
+from service.core.path_schemas import (
+    CoordinationGraphResponse,
+    PathsRequest,
+    PathsScheduleResponse,
+)
 from service.core.problem import problem_from_request
+from service.core.schemas import ScheduleRequest
 from service.geometry.graph import GeometrySettings
 from service.geometry.paths import RobotPath
 from service.motion.plan import plan_paths
@@ -199,11 +204,16 @@ def assert_motion_valid(req: PathsRequest, out: PathsScheduleResponse) -> None:
 
 def _assert_rendered_is_valid(out: PathsScheduleResponse) -> None:
     """The answer, constructed without validation, is what validating its JSON gives, and
-    serializes without a warning (every field already of its declared type)."""
+    serializes without a warning (every field already of its declared type; the graph is
+    built as its JSON body, exactly what the validated request writes)."""
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         body = out.model_dump_json()
-    assert PathsScheduleResponse.model_validate_json(body) == out
+    validated = PathsScheduleResponse.model_validate_json(body)
+    assert validated.model_dump_json() == body
+    assert validated.model_dump(exclude={"graph"}) == out.model_dump(exclude={"graph"})
+    graph = None if validated.graph is None else validated.graph.model_dump(mode="json")
+    assert graph == out.graph
 
 
 def _assert_clearance_agrees(
@@ -249,19 +259,27 @@ def _assert_schedule_describes_trajectories(
     assert out.cost == getattr(out.costs, out.objective)
 
 
+def graph_of(out: PathsScheduleResponse | CoordinationGraphResponse) -> ScheduleRequest | None:
+    """The answer's graph validated as a graph-form request (the service builds it as its
+    JSON body)."""
+    graph = out.graph
+    return ScheduleRequest.model_validate(graph) if isinstance(graph, dict) else graph
+
+
 def evaluated(out: PathsScheduleResponse) -> tuple[dict[str, float], dict[str, float]]:
     """The dispatcher evaluator's view of the answer's own assignment on its graph: per
     robot of the graph its completion, and the four costs."""
-    assert out.graph is not None
+    graph = graph_of(out)
+    assert graph is not None
     a_first = np.array(
-        [a["from"] == c.a for a, c in zip(out.assignment, out.graph.conflicts, strict=True)]
+        [a["from"] == c.a for a, c in zip(out.assignment, graph.conflicts, strict=True)]
     )
     following = np.array([a["type"] == "following" for a in out.assignment], dtype=bool)
-    problem = problem_from_request(out.graph)
+    problem = problem_from_request(graph)
     evaluation = Evaluator(problem).evaluate(Assignments.single(a_first, following))
     completion = evaluation.completion[0].tolist()
     costs = {k: float(v[0]) for k, v in evaluation.costs.items()}
-    return {r.id: c for r, c in zip(out.graph.robots, completion, strict=True)}, costs
+    return {r.id: c for r, c in zip(graph.robots, completion, strict=True)}, costs
 
 
 @st.composite
