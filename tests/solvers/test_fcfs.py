@@ -1,4 +1,5 @@
-"""FCFS: always valid, deterministic, first to arrive passes first."""
+"""FCFS: always valid, deterministic, first to arrive passes first; its blends toward robot
+priorities, the searches' plain start."""
 
 from __future__ import annotations
 
@@ -9,11 +10,13 @@ import pytest
 
 from service.core.check import check
 from service.core.problem import problem_from_request
-from service.core.schemas import ScheduleRequest
+from service.core.schemas import OBJECTIVES, ScheduleRequest
 from service.learning.generate import small_problem, stitched_problem
-from service.solvers.fcfs import fcfs
-from service.solvers.registry import SolveContext, get_solver
+from service.solvers.fcfs import BLENDS, blended_priorities, fcfs, fcfs_priorities
+from service.solvers.registry import SolveContext, SolverOutput, get_solver
+from service.solvers.tabu import plain_start
 from tests.reference import tiny_request, trap_request
+from tests.solvers.common import context, cost
 
 
 def _context(req: dict[str, Any], seed: int = 0, time_limit_s: float = 5.0) -> SolveContext:
@@ -79,3 +82,56 @@ def test_fcfs_grants_following_earliest_first() -> None:
 
 def test_fcfs_is_registered() -> None:
     assert get_solver("fcfs") is fcfs
+
+
+@pytest.mark.parametrize(
+    "req", [r for _, _, r in REQUESTS], ids=[f"{k}-{s}" for k, s, _ in REQUESTS]
+)
+def test_blended_priorities_rank_along_paths_and_include_fcfs(req: dict[str, Any]) -> None:
+    p = _context(req).problem
+    ranks, scores = blended_priorities(p)
+    assert ranks.shape == (len(BLENDS), p.n_nodes) and scores.shape == (len(BLENDS), p.n_conflicts)
+    same_robot = p.node_robot[1:] == p.node_robot[:-1]  # (V-1,) v and v + 1 on one path
+    assert np.all(np.diff(ranks, axis=1)[:, same_robot] >= 0)  # what the decoder needs
+    fcfs_ranks, fcfs_scores = fcfs_priorities(p)
+    np.testing.assert_array_equal(ranks[BLENDS.index(0.0)], fcfs_ranks)
+    np.testing.assert_array_equal(scores, np.repeat(fcfs_scores[None], len(BLENDS), axis=0))
+
+
+@pytest.mark.parametrize("objective", OBJECTIVES)
+@pytest.mark.parametrize(
+    "req", [r for _, _, r in REQUESTS], ids=[f"{k}-{s}" for k, s, _ in REQUESTS]
+)
+def test_the_plain_start_is_valid_and_no_worse_than_fcfs(
+    req: dict[str, Any], objective: str
+) -> None:
+    ctx = context(req, objective)
+    start = plain_start(ctx)
+    assert check(ctx.problem, ctx.cliques, start).ok.tolist() == [True]
+    assert cost(ctx, SolverOutput(start)) <= cost(ctx, fcfs(ctx))
+
+
+def test_a_blend_beats_fcfs_where_robots_queue_for_one_corridor() -> None:
+    """Three robots for one exclusive corridor: the first to arrive holds it for 10 s on a
+    long trip, two short trips arrive just after and hold it 1 s each. FCFS makes both
+    short trips wait 10 s; a blend toward completion lets them pass first (the long trip
+    waits 2 s), lowering the average completion."""
+
+    def robot(rid: str, enter: float, exit_: float, goal: float) -> dict[str, Any]:
+        node = {"id": f"{rid}/0", "enter": enter, "exit": exit_, "density": 1}
+        return {"id": rid, "nodes": [node], "goal_time": goal}
+
+    req = {
+        "robots": [
+            robot("long", 0.0, 10.0, 100.0),
+            robot("s1", 0.5, 1.5, 3.0),
+            robot("s2", 0.7, 1.7, 3.2),
+        ],
+        "conflicts": [
+            {"a": "long/0", "b": "s1/0"},
+            {"a": "long/0", "b": "s2/0"},
+            {"a": "s1/0", "b": "s2/0"},
+        ],
+    }
+    ctx = context(req, "avg_completion")
+    assert cost(ctx, SolverOutput(plain_start(ctx))) < cost(ctx, fcfs(ctx)) - 5.0
