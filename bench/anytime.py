@@ -4,11 +4,12 @@
 (0.1, 0.3, 1, 3 and 10 s), each method through the service's dispatcher as a
 request with that ``options.time_limit_s`` (:data:`METHODS`):
 
-* ``auto``: the portfolio as shipped (FCFS, then ``gnn_vae_refined`` with 30 %
-  of the budget above the exact threshold, then CP-SAT hinted with the best);
-  also at ``--target-budget`` (5 s, the budget of issue 11's second target);
-* ``auto_tabu``: the same portfolio with its first stage seeded by FCFS and
-  refined by tabu search instead of the GNN-VAE (``large_solver="tabu"``);
+* ``auto``: the portfolio as shipped (the best of FCFS and its blends, then tabu
+  search with 30 % of the budget above the exact threshold, then CP-SAT hinted
+  with the best); also at ``--target-budget`` (5 s, the budget of issue 11's
+  second target);
+* ``auto_gnn``: the same portfolio with ``gnn_vae_refined`` as its first stage
+  (``large_solver="gnn_vae_refined"``, the default until 2026-11-24);
 * ``gnn_vae_refined`` and ``tabu`` (from FCFS) alone: each stage alone;
 * ``exact``: plain CP-SAT hinted with FCFS.
 
@@ -69,8 +70,8 @@ __all__ = ["METHODS", "QUICK", "Config", "main", "run"]
 
 # Method name -> (solver, the policy's large solver: the portfolio's first stage).
 METHODS: dict[str, tuple[str, str]] = {
-    "auto": ("auto", "gnn_vae_refined"),
-    "auto_tabu": ("auto", "tabu"),
+    "auto": ("auto", "tabu"),
+    "auto_gnn": ("auto", "gnn_vae_refined"),
     "gnn_vae_refined": ("gnn_vae_refined", "gnn_vae_refined"),
     "tabu": ("tabu", "gnn_vae_refined"),
     "exact": ("exact", "gnn_vae_refined"),

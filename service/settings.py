@@ -53,7 +53,13 @@ class Settings(BaseSettings):
     # CP-SAT improved no 250-robot warehouse (12,000-23,000 conflicts) in 10 s, and
     # the 70 % it took there made auto worse with 10 s than with 5 s.
     exact_stage_max_conflicts: int = Field(default=10_000, ge=0)
-    large_solver: str = "gnn_vae_refined"
+    # ``auto``'s first stage above exact_max_conflicts. Measured (2026-11-24, bench.anytime,
+    # auto with tabu from the blended start vs with gnn_vae_refined, cost ratio against
+    # the best found): generated warehouses and floors of 515-3,900 conflicts 0.88-0.97 vs
+    # 0.82-0.94 at 1 s and 0.98-1.00 vs 0.93-1.00 at 5 s; 250 robots 0.83-0.87 vs
+    # 0.69-0.73 at 1 s, 0.94 / 1.00 vs 1.00 / 0.98 at 5 s; the conformance sets (83-262
+    # conflicts) identical. The GNN-VAE solvers stay available by name.
+    large_solver: str = "tabu"
     # Where the learned models live (manifest.json + <objective>/<version>/); a missing
     # or corrupt model degrades its objective to the exact solver, then FCFS.
     model_store: Path = DEFAULT_MODEL_STORE

@@ -230,9 +230,10 @@ def warm_up(runtime: Runtime) -> None:
         load_models(runtime, runtime.model_store)
     try:
         dispatch(WARMUP_REQUEST, runtime.policy)
-        # The large-problem path too (the GNN-VAE, the ES and tabu's kernels), or its fallback.
-        large = OptionsIn(solver=runtime.policy.large_solver, samples=2, time_limit_s=10.0)
-        dispatch(WARMUP_REQUEST.model_copy(update={"options": large}), runtime.policy)
+        # The large-problem paths too (tabu's kernels, the GNN-VAE), or their fallbacks.
+        for solver in sorted({runtime.policy.large_solver, "gnn_vae_refined"}):
+            large = OptionsIn(solver=solver, samples=2, time_limit_s=10.0)
+            dispatch(WARMUP_REQUEST.model_copy(update={"options": large}), runtime.policy)
         # The paths form: geometry, dependency plan, executor and clearance kernels.
         plan_paths(PATHS_WARMUP_REQUEST, runtime.policy, GeometrySettings())
     except Exception as exc:
