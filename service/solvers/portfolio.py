@@ -3,12 +3,13 @@
 It returns when optimality is proven or when the budget is spent, whichever
 comes first, improving in stages:
 
-1. **instant**: FCFS, or the previous answer of a re-schedule when cheaper
-   (valid by construction, microseconds to milliseconds);
+1. **instant**: the cheapest of FCFS, its blends toward robot priorities and the
+   previous answer of a re-schedule (:func:`~service.solvers.tabu.plain_start`;
+   valid by construction, milliseconds);
 2. **first stage** (problems above ``exact_max_conflicts``): the policy's large
-   solver (default ``gnn_vae_refined``: the learned model's best sample refined
-   by tabu search), or tabu search from the previous answer in a re-schedule,
-   with FIRST_STAGE_SHARE of the budget;
+   solver (default ``tabu``: tabu search from that start, measured better than the
+   GNN-VAE refined by tabu search, ``gnn_vae_refined``), or tabu search from the
+   previous answer in a re-schedule, with FIRST_STAGE_SHARE of the budget;
 3. **exact**: CP-SAT hinted with the best answer so far, for the rest of the
    budget; it proves optimality where it can (``solver.optimal`` is true only
    then) and never returns worse than its hint (the cheaper is kept, by the one
