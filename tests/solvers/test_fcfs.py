@@ -8,11 +8,18 @@ from typing import Any
 import numpy as np
 import pytest
 
+from service.core.assignment import Assignments
 from service.core.check import check
 from service.core.problem import problem_from_request
 from service.core.schemas import OBJECTIVES, ScheduleRequest
 from service.learning.generate import small_problem, stitched_problem
-from service.solvers.fcfs import BLENDS, blended_priorities, fcfs, fcfs_priorities
+from service.solvers.fcfs import (
+    COMPLETION_BLENDS,
+    EXIT_BLENDS,
+    blended_priorities,
+    fcfs,
+    fcfs_priorities,
+)
 from service.solvers.registry import SolveContext, SolverOutput, get_solver
 from service.solvers.tabu import plain_start
 from tests.reference import tiny_request, trap_request
@@ -90,12 +97,14 @@ def test_fcfs_is_registered() -> None:
 def test_blended_priorities_rank_along_paths_and_include_fcfs(req: dict[str, Any]) -> None:
     p = _context(req).problem
     ranks, scores = blended_priorities(p)
-    assert ranks.shape == (len(BLENDS), p.n_nodes) and scores.shape == (len(BLENDS), p.n_conflicts)
+    rows = len(COMPLETION_BLENDS) + len(EXIT_BLENDS)
+    assert ranks.shape == (rows, p.n_nodes) and scores.shape == (rows, p.n_conflicts)
     same_robot = p.node_robot[1:] == p.node_robot[:-1]  # (V-1,) v and v + 1 on one path
     assert np.all(np.diff(ranks, axis=1)[:, same_robot] >= 0)  # what the decoder needs
     fcfs_ranks, fcfs_scores = fcfs_priorities(p)
-    np.testing.assert_array_equal(ranks[BLENDS.index(0.0)], fcfs_ranks)
-    np.testing.assert_array_equal(scores, np.repeat(fcfs_scores[None], len(BLENDS), axis=0))
+    np.testing.assert_array_equal(ranks[COMPLETION_BLENDS.index(0.0)], fcfs_ranks)
+    np.testing.assert_array_equal(ranks[-1], p.node_exit)  # exit blend mu = 1
+    np.testing.assert_array_equal(scores, np.repeat(fcfs_scores[None], rows, axis=0))
 
 
 @pytest.mark.parametrize("objective", OBJECTIVES)
@@ -135,3 +144,13 @@ def test_a_blend_beats_fcfs_where_robots_queue_for_one_corridor() -> None:
     }
     ctx = context(req, "avg_completion")
     assert cost(ctx, SolverOutput(plain_start(ctx))) < cost(ctx, fcfs(ctx)) - 5.0
+
+
+def test_the_plain_start_is_found_once_per_context_and_warm_start() -> None:
+    ctx = context(stitched_problem(1, 40, 3.0), "avg_completion")
+    first = plain_start(ctx)
+    assert plain_start(ctx) is first  # the portfolio and its first stage share it
+    ctx.warm = Assignments(first.a_first.copy(), first.following.copy())
+    again = plain_start(ctx)  # a new warm start: found again (and no worse)
+    assert again is not first
+    assert cost(ctx, SolverOutput(again)) <= cost(ctx, SolverOutput(first))
