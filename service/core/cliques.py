@@ -129,10 +129,24 @@ class Cliques:
 
         Shapes: following (S, M) bool -> (S, Q) int.
         """
-        following = np.atleast_2d(following)
-        if self.budget.size == 0:
-            return np.zeros((following.shape[0], 0), dtype=np.int64)
-        return np.add.reduceat(following[:, self.edge].astype(np.int64), self.start[:-1], axis=1)
+        following = np.ascontiguousarray(np.atleast_2d(following), dtype=np.bool_)
+        return _count_following(following, self.edge, self.start)
+
+
+@numba.njit(cache=True, nogil=True)
+def _count_following(following: np.ndarray, edge: np.ndarray, start: np.ndarray) -> np.ndarray:
+    """(S, Q) following-type conflicts of each clique: a loop, not a gather of the (S, E)
+    incidences (2,000,000 incidences within the service's bound: gigabytes for 100
+    samples as int64)."""
+    n_samples, n_cliques = following.shape[0], start.size - 1
+    out = np.zeros((n_samples, n_cliques), dtype=np.int64)
+    for s in range(n_samples):
+        for q in range(n_cliques):
+            count = 0
+            for k in range(start[q], start[q + 1]):
+                count += following[s, edge[k]]
+            out[s, q] = count
+    return out
 
 
 def find_cliques(problem: Problem) -> Cliques:

@@ -46,9 +46,6 @@ __all__ = ["MONOTONE", "Decoder", "bids_from_ranks", "decode_candidates"]
 # weaker); for them the decoder fills every clique budget greedily by score.
 MONOTONE = frozenset({"avg_completion", "max_completion", "avg_delay"})
 
-# Budget of the padding clique in the edge -> clique table: never binds.
-_UNBOUNDED = np.iinfo(np.int64).max // 2
-
 
 @numba.njit(cache=True)
 def _topological_order(start: np.ndarray, dst: np.ndarray) -> np.ndarray:
@@ -119,8 +116,9 @@ def bids_from_ranks(problem: Problem, ranks: np.ndarray) -> np.ndarray:
 def _greedy_kernel(
     order: np.ndarray,  # (S, B) int, each sample's bound conflicts, best score first
     cand: np.ndarray,  # (S, B) bool, candidates for following-type
-    cliques: np.ndarray,  # (B, P) int, binding cliques of each bound conflict (padded)
-    budget: np.ndarray,  # (Q+1,) int, each clique's budget (the padding clique unbounded)
+    start: np.ndarray,  # (B+1,) int, bound conflict b's cliques are cliques[start[b]:start[b+1]]
+    cliques: np.ndarray,  # (E',) int, binding cliques of the bound conflicts
+    budget: np.ndarray,  # (Q,) int, each clique's budget
 ) -> np.ndarray:  # (S, B) bool, chosen following-type
     """Per sample, take candidates in order while every clique they are in has budget.
 
@@ -137,12 +135,12 @@ def _greedy_kernel(
             if not cand[s, e]:
                 continue
             ok = True
-            for q in cliques[e]:
+            for q in cliques[start[e] : start[e + 1]]:
                 if left[q] <= 0:
                     ok = False
                     break
             if ok:
-                for q in cliques[e]:
+                for q in cliques[start[e] : start[e + 1]]:
                     left[q] -= 1
                 chosen[s, e] = True
     return chosen
@@ -206,7 +204,12 @@ class Decoder:
         return out
 
     def _build_binding_table(self) -> None:
-        """Conflicts inside binding cliques, each with its padded list of those cliques."""
+        """Conflicts inside binding cliques, each with the list of those cliques (CSR).
+
+        A list per conflict, not a table padded to the longest: one conflict can sit in
+        thousands of cliques (20,000 within the service's bound) while the others sit in
+        one, and the padded table then took gigabytes.
+        """
         cl = self.cliques
         binding = cl.binding()  # (Q,)
         inc_clique = cl.clique_of_incidence  # (E,)
@@ -215,14 +218,9 @@ class Decoder:
         order = np.lexsort((cliques, edges))
         edges, cliques = edges[order], cliques[order]
         self._bound_edges, first = np.unique(edges, return_index=True)  # (B,)
-        n_bound = self._bound_edges.size
-        per_edge = np.diff(np.append(first, edges.size))
-        pad_width = int(per_edge.max()) if n_bound else 1
-        table = np.full((n_bound, pad_width), cl.budget.size, dtype=np.int64)  # pad -> extra clique
-        column = np.arange(edges.size) - np.repeat(first, per_edge)
-        table[np.repeat(np.arange(n_bound), per_edge), column] = cliques
-        self._bound_cliques = table  # (B, P) clique indices, padded with Q
-        self._budget = np.append(cl.budget, _UNBOUNDED)  # (Q+1,)
+        self._bound_start = np.append(first, edges.size).astype(np.int64)  # (B+1,)
+        self._bound_cliques = cliques.astype(np.int64)  # (E',) conflict b's: start[b]:start[b+1]
+        self._budget = cl.budget.copy()  # (Q,)
 
     def ranks(self, bids: np.ndarray) -> np.ndarray:
         """Chain sums of bids. Shapes: bids (S, V) positive -> ranks (S, V)."""
@@ -266,7 +264,7 @@ class Decoder:
         # Descending score, ties by conflict index (stable sort of the negated score).
         order = np.argsort(-scores[:, bound], axis=1, kind="stable")  # (S, B)
         cand = np.ascontiguousarray(candidate[:, bound])
-        return _greedy_kernel(order, cand, self._bound_cliques, self._budget)
+        return _greedy_kernel(order, cand, self._bound_start, self._bound_cliques, self._budget)
 
     def decode(
         self, bids: np.ndarray, scores: np.ndarray, threshold: float | None = None

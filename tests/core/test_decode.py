@@ -200,3 +200,52 @@ def test_assignments_take_and_single() -> None:
     assert batch.take(np.array([0, 2])).n_samples == 2
     with pytest.raises(ValueError):
         Assignments(np.zeros(3, dtype=bool), np.zeros(3, dtype=bool))
+
+
+def _hot_conflict(robots: int, nodes: int) -> Problem:
+    """Conflict u-v inside robots x nodes maximal cliques {u, v, w}: every node w of the
+    other robots conflicts with u and v (and not with its own robot's nodes)."""
+
+    def node(nid: str, k: int) -> dict[str, object]:
+        return {"id": nid, "enter": 2.0 * k, "exit": 2.0 * k + 1.0, "density": 2}
+
+    ws = [[f"w{r}/{k}" for k in range(nodes)] for r in range(robots)]
+    return problem_from_request(
+        ScheduleRequest.model_validate(
+            {
+                "robots": [
+                    {"id": "a", "nodes": [node("u", 0)]},
+                    {"id": "b", "nodes": [node("v", 0)]},
+                    *[
+                        {"id": f"w{r}", "nodes": [node(w, k) for k, w in enumerate(ws[r])]}
+                        for r in range(robots)
+                    ],
+                ],
+                "conflicts": [
+                    {"a": "u", "b": "v"},
+                    *[{"a": x, "b": w} for row in ws for w in row for x in ("u", "v")],
+                ],
+            }
+        )
+    )
+
+
+def test_a_conflict_in_thousands_of_cliques_costs_memory_in_proportion() -> None:
+    """The decoder's clique lists and the checker's counts grow with the incidences, not
+    with conflicts x the most cliques one conflict is in (a padded table: 144 MB here)."""
+    import tracemalloc
+
+    problem = _hot_conflict(30, 100)  # 3,000 cliques {u, v, w}: u-v is in all of them
+    cliques = find_cliques(problem)
+    assert cliques.budget.size == 3000 and cliques.binding().all()
+    tracemalloc.start()
+    decoder = Decoder(problem, cliques)
+    out = decoder.decode_ranks(problem.node_enter[None], np.zeros((1, problem.n_conflicts)))
+    ok = check(problem, cliques, out).ok
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    assert ok.tolist() == [True]
+    assert peak < 8 * 1024 * 1024  # 9,000 incidences: well under a megabyte of lists
+    # Density 2 allows 2 following conflicts per clique: u-v takes one in all of them.
+    counts = cliques.following_counts(out.following)[0]
+    assert counts.max() <= 2
