@@ -199,8 +199,8 @@ class CoordinationGraph:
             goal_time=np.array([self.paths[r].finish_time for r in robots.tolist()]),
             conf_a=conf_a,
             conf_b=conf_b,
-            pair_enter=self._pair_times[:, [0, 2]].copy(),
-            pair_exit=self._pair_times[:, [1, 3]].copy(),
+            pair_enter=self._pair_times[:, [0, 2]],  # (M, 2) side a, side b
+            pair_exit=self._pair_times[:, [1, 3]],
             forced=self.forced.astype(np.int8),
             density_limits=tuple(
                 DensityLimit(np.array(sorted(pair), dtype=np.int64), 1)
