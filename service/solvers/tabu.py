@@ -74,13 +74,15 @@ def tabu_search(
     start: Assignments,
     cfg: TabuConfig = TabuConfig(),
     budget_s: float | None = None,
+    seed: int | None = None,
 ) -> tuple[Assignments, float, int]:
     """Tabu search from the valid assignment ``start`` -> (best, its cost, iterations run).
 
-    Runs for at most ``budget_s`` seconds (default: the request's time limit).
+    Runs for at most ``budget_s`` seconds (default: the request's time limit); its random
+    candidate lists come from ``seed`` (default: the request's).
     """
     deadline = time.perf_counter() + (ctx.time_limit_s if budget_s is None else budget_s)
-    rng = np.random.default_rng(ctx.seed)
+    rng = np.random.default_rng(ctx.seed if seed is None else seed)
     graph = ctx.orientation
     evaluate = ctx.evaluator.evaluate
     neighbour_costs = IncrementalEvaluator(ctx.evaluator).costs

@@ -139,3 +139,19 @@ def test_auto_runs_no_cp_sat_stage_above_its_cap(monkeypatch: pytest.MonkeyPatch
     assert answer.solver.name == "auto" and not answer.solver.optimal
     assert "no CP-SAT stage above 10 conflicts" in answer.solver.detail
     assert answer.cost >= line["ref_cost"] * (1 - 1e-9)
+
+
+def test_auto_uses_its_budget_when_tabu_stops_early_and_no_cp_sat_follows() -> None:
+    """Tabu search stops on its own (patience) within a fraction of a second on a small
+    problem; with no CP-SAT stage to follow, auto restarts it with new seeds from the best
+    so far until the budget is spent, instead of returning early unproven."""
+    line = json.loads((DATA / "wh_25.jsonl").read_text().splitlines()[0])
+    body = {**line["request"], "options": {"solver": "auto", "time_limit_s": 1.5}}
+    policy = DispatchPolicy(exact_max_conflicts=0, exact_stage_max_conflicts=10)
+    start = time.monotonic()
+    answer = dispatch(ScheduleRequest.model_validate(body), policy)
+    elapsed = time.monotonic() - start
+    assert not answer.solver.optimal
+    assert elapsed >= 1.2  # the budget was used (load only makes it slower)
+    assert answer.cost >= line["ref_cost"] * (1 - 1e-9)
+    assert answer.checks.acyclic and answer.checks.density
