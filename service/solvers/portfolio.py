@@ -16,7 +16,9 @@ comes first, improving in stages:
    evaluator). It is skipped when building its model alone would not fit in
    what is left (``exact.build_seconds``), and above ``exact_stage_max_conflicts``
    (where it was measured to improve nothing within seconds); the first stage then
-   gets the whole budget, and tabu search polishes its answer with what it leaves.
+   gets the whole budget, and tabu search polishes its answer with what it leaves,
+   restarted from the best with the next seed whenever it stops on its own, so that
+   an unproven answer comes at the deadline, not before.
 
 Small problems go straight to stage 3 (CP-SAT proves them in milliseconds).
 Robots that share no conflict, directly or through others, form independent
