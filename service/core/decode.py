@@ -220,7 +220,6 @@ class Decoder:
         self._bound_edges, first = np.unique(edges, return_index=True)  # (B,)
         self._bound_start = np.append(first, edges.size).astype(np.int64)  # (B+1,)
         self._bound_cliques = cliques.astype(np.int64)  # (E',) conflict b's: start[b]:start[b+1]
-        self._budget = cl.budget.copy()  # (Q,)
 
     def ranks(self, bids: np.ndarray) -> np.ndarray:
         """Chain sums of bids. Shapes: bids (S, V) positive -> ranks (S, V)."""
@@ -264,7 +263,9 @@ class Decoder:
         # Descending score, ties by conflict index (stable sort of the negated score).
         order = np.argsort(-scores[:, bound], axis=1, kind="stable")  # (S, B)
         cand = np.ascontiguousarray(candidate[:, bound])
-        return _greedy_kernel(order, cand, self._bound_start, self._bound_cliques, self._budget)
+        return _greedy_kernel(
+            order, cand, self._bound_start, self._bound_cliques, self.cliques.budget
+        )
 
     def decode(
         self, bids: np.ndarray, scores: np.ndarray, threshold: float | None = None

@@ -83,6 +83,33 @@ def forced_arcs(
 
 
 @dataclass(frozen=True, eq=False)
+class _PairIndex:
+    """Conflicts by node pair: sorted (M,) keys min*N + max of every conflict's nodes, and
+    (M,) the conflict of each key."""
+
+    keys: np.ndarray
+    order: np.ndarray
+    n_nodes: int
+
+    @classmethod
+    def of(cls, conf_a: np.ndarray, conf_b: np.ndarray, n_nodes: int) -> _PairIndex:
+        a, b = conf_a.astype(np.int64), conf_b.astype(np.int64)
+        keys = np.minimum(a, b) * n_nodes + np.maximum(a, b)  # (M,) unique per pair
+        order = np.argsort(keys)
+        return cls(keys[order], order, n_nodes)
+
+    def find(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """The conflict joining nodes ``u`` and ``v`` (same shape) in either order, or -1
+        (also where a node is -1)."""
+        if self.keys.size == 0:
+            return np.full(np.shape(u), -1, dtype=np.int64)
+        wanted = np.minimum(u, v) * self.n_nodes + np.maximum(u, v)  # like u
+        pos = np.minimum(np.searchsorted(self.keys, wanted), self.keys.size - 1)  # like u
+        hit = (u >= 0) & (v >= 0) & (self.keys[pos] == wanted)
+        return np.where(hit, self.order[pos], -1)
+
+
+@dataclass(frozen=True, eq=False)
 class Problem:
     """A validated coordination skeleton graph.
 
@@ -144,23 +171,13 @@ class Problem:
         return bool(self.forced.any())
 
     @cached_property
-    def _pair_keys(self) -> tuple[np.ndarray, np.ndarray]:
-        """Sorted (M,) keys min*N + max of every conflict's node pair, and (M,) their order."""
-        a, b = self.conf_a.astype(np.int64), self.conf_b.astype(np.int64)
-        keys = np.minimum(a, b) * self.n_nodes + np.maximum(a, b)  # (M,) unique per pair
-        order = np.argsort(keys)
-        return keys[order], order
+    def _pairs(self) -> _PairIndex:
+        return _PairIndex.of(self.conf_a, self.conf_b, self.n_nodes)
 
     def conflict_between(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """The conflict joining nodes ``u`` and ``v`` (same shape, any) in either order,
         or -1 (also where a node is -1)."""
-        if self.n_conflicts == 0:
-            return np.full(u.shape, -1, dtype=np.int64)
-        keys, order = self._pair_keys
-        wanted = np.minimum(u, v) * self.n_nodes + np.maximum(u, v)  # like u
-        pos = np.minimum(np.searchsorted(keys, wanted), keys.size - 1)  # like u
-        hit = (u >= 0) & (v >= 0) & (keys[pos] == wanted)
-        return np.where(hit, order[pos], -1)
+        return self._pairs.find(u, v)
 
     @cached_property
     def tp_robot(self) -> np.ndarray:
@@ -419,17 +436,13 @@ def _density_limits(
             messages[k] = found
         else:
             resolved[k] = [node_index[n] for n in lim.nodes]
-    n = max(len(node_index), 1)
-    keys = np.sort(np.minimum(conf_a, conf_b).astype(np.int64) * n + np.maximum(conf_a, conf_b))
+    pairs = _PairIndex.of(conf_a, conf_b, len(node_index))
     sizes = {k: len(idx) for k, idx in resolved.items()}
     for size in sorted(set(sizes.values())):
         which = [k for k, s in sizes.items() if s == size]
         nodes = np.array([resolved[k] for k in which], dtype=np.int64)  # (L, size)
         i, j = np.triu_indices(size, 1)  # every pair, in the order of the limit's nodes
-        u, v = nodes[:, i], nodes[:, j]  # (L, pairs)
-        wanted = np.minimum(u, v) * n + np.maximum(u, v)
-        pos = np.minimum(np.searchsorted(keys, wanted), max(keys.size - 1, 0))
-        missing = keys[pos] != wanted if keys.size else np.ones(wanted.shape, dtype=bool)
+        missing = pairs.find(nodes[:, i], nodes[:, j]) < 0  # (L, pairs)
         for row in np.flatnonzero(missing.any(axis=1)).tolist():
             k, p = which[row], int(np.argmax(missing[row]))
             names = req.density_limits[k].nodes
