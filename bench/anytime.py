@@ -322,7 +322,6 @@ def _parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     p.add_argument("--budgets", type=float, nargs="+", help="seconds per solve")
     p.add_argument("--target-budget", type=float, help=f"also run {TARGET_METHOD} at this budget")
     add_case_args(p)
-    p.add_argument("--per-world", type=int, help="worlds of each kind and size")
     add_run_args(p)
     return p.parse_args(argv)
 

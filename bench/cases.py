@@ -268,10 +268,12 @@ def cell(s: dict[str, Any] | None) -> str:
 
 
 def add_case_args(p: argparse.ArgumentParser) -> None:
-    """The flags choosing the cases: conformance sets, problems per set, generated worlds."""
+    """The flags choosing the cases: conformance sets, problems per set, generated worlds
+    and how many of each."""
     p.add_argument("--sets", nargs="*", help="conformance sets (tests/data/conformance)")
     p.add_argument("--per-set", type=int, help="problems per set (default: all)")
     p.add_argument("--worlds", nargs="*", help="generated worlds as kind:robots")
+    p.add_argument("--per-world", type=int, help="worlds of each kind and size")
 
 
 def run_cli(

@@ -60,7 +60,7 @@ from bench.report import (
 from service.core.assignment import Assignments
 from service.core.schemas import OBJECTIVES
 from service.learning.store import StoredModel
-from service.solvers.dispatch import DispatchPolicy  # noqa: F401  (registers every solver)
+from service.solvers.dispatch import DispatchPolicy  # (importing it registers every solver)
 from service.solvers.exact import DTIME_PER_S, MIN_SEARCH_S, ExactModel, build_model, search
 from service.solvers.fcfs import fcfs
 from service.solvers.portfolio import FIRST_STAGE_SHARE
@@ -70,7 +70,7 @@ __all__ = ["QUICK", "VARIANTS", "Config", "Variant", "bound_by", "main", "run", 
 
 MODEL_STORE = Path(__file__).resolve().parents[1] / "model_store"
 FCFS, STAGE, NO_HINT = "fcfs", "stage", "none"  # where a configuration's hint comes from
-STAGE_SOLVER = "gnn_vae_refined"  # the portfolio's first stage (the policy's large solver)
+STAGE_SOLVER = DispatchPolicy().large_solver  # the portfolio's first stage
 
 
 @dataclass(frozen=True)
@@ -86,6 +86,7 @@ class Variant:
     label: str
     workers: int = 1
     linearization: int = 1  # CP-SAT's default; the service's before issue 11
+    probing: int = 2  # cp_model_probing_level: CP-SAT's default; the service's before 2026-11-24
     tuning: tuple[tuple[str, bool | int | float], ...] = ()  # further SatParameters fields
     hint: str = FCFS
     cutoff: bool = False  # bound the objective by the hint's cost (bound_by)
@@ -97,7 +98,12 @@ _INTERLEAVE = (("interleave_search", True),)
 VARIANTS: dict[str, Variant] = {
     "default": Variant("1 worker, linearization 1, FCFS hint: the service's exact before"),
     "no_hint": Variant("no hint", hint=NO_HINT),
-    "lin0": Variant("linearization 0 (the service's exact now)", linearization=0),
+    "lin0": Variant("linearization 0 (the service's exact until 2026-11-24)", linearization=0),
+    "lin0_probe0": Variant(
+        "linearization 0, no probing in presolve (the service's exact now)",
+        linearization=0,
+        probing=0,
+    ),
     "lin2": Variant("linearization 2", linearization=2),
     "cutoff": Variant("objective <= the hint's cost", cutoff=True),
     "lin0_cutoff": Variant(
@@ -108,7 +114,9 @@ VARIANTS: dict[str, Variant] = {
     ),
     "stage_cutoff": Variant("stage hint, objective <= its cost", hint=STAGE, cutoff=True),
     "stage_lin0": Variant(
-        "stage hint, linearization 0 (auto's CP-SAT stage now)", linearization=0, hint=STAGE
+        "stage hint, linearization 0 (auto's CP-SAT stage until 2026-11-24)",
+        linearization=0,
+        hint=STAGE,
     ),
     "stage_lin0_cutoff": Variant(
         "stage hint, linearization 0, objective <= its cost",
@@ -116,12 +124,24 @@ VARIANTS: dict[str, Variant] = {
         hint=STAGE,
         cutoff=True,
     ),
+    "stage_lin0_probe0": Variant(
+        "stage hint, linearization 0, no probing in presolve (auto's CP-SAT stage now)",
+        linearization=0,
+        probing=0,
+        hint=STAGE,
+    ),
+    "stage_lin0_probe1": Variant(
+        "stage hint, linearization 0, light probing in presolve",
+        linearization=0,
+        probing=1,
+        hint=STAGE,
+    ),
     "w2": Variant("2 workers", workers=2),
     "w2_lns": Variant("2 workers, LNS only", workers=2, tuning=(("use_lns_only", True),)),
     "w1_interleave": Variant("1 worker, interleave_search", tuning=_INTERLEAVE),
     "w2_interleave": Variant("2 workers, interleave_search", workers=2, tuning=_INTERLEAVE),
     "w1_dtime": Variant(
-        "1 worker, linearization 0, deterministic-time budget (SCHEDULER_EXACT_DETERMINISTIC)",
+        "1 worker, linearization 0, deterministic-time budget",
         linearization=0,
         deterministic=True,
     ),
@@ -147,6 +167,7 @@ class Config:
     objective: str | None = None  # replaces the sets' own (then: against the best found)
     # Generated worlds as "kind:robots" (bench.cases.world_case), against the best found.
     worlds: tuple[str, ...] = ()
+    per_world: int = 1
     budgets: tuple[float, ...] = (1.0, 3.0)  # seconds; the first is also run twice
     dtime_per_s: float = DTIME_PER_S  # deterministic time per budget second (the service's)
     base_seed: int = 0
@@ -231,7 +252,11 @@ def run_once(
         if variant.cutoff:
             bounded = bound_by(em, hint, deadline - time.monotonic())
     left = max(MIN_SEARCH_S, deadline - time.monotonic())
-    tuning = {"linearization_level": variant.linearization, **dict(variant.tuning)}
+    tuning = {
+        "linearization_level": variant.linearization,
+        "cp_model_probing_level": variant.probing,
+        **dict(variant.tuning),
+    }
     if variant.deterministic:  # from the budget alone: a limit from what is left varies
         tuning["max_deterministic_time"] = budget_s * cfg.dtime_per_s
     searched = time.perf_counter()
@@ -293,7 +318,7 @@ def warm_up(cfg: Config, case: Case, models: Mapping[str, StoredModel]) -> None:
 def run(cfg: Config, progress: bool = True) -> dict[str, Any]:
     """Every configuration on every problem; return everything that gets written."""
     cases = conformance_cases(cfg.sets, cfg.per_set, cfg.objective) + world_cases(
-        cfg.worlds, 1, cfg.cache, cfg.base_seed, cfg.objective or "avg_completion"
+        cfg.worlds, cfg.per_world, cfg.cache, cfg.base_seed, cfg.objective or "avg_completion"
     )
     models = service_policy(cfg.store).models
     warm_up(cfg, min(cases, key=lambda c: c.problem.n_conflicts), models)

@@ -21,10 +21,11 @@ are whole (1 ms data is exact up to 1000 s), but never finer than
 CP-SAT much slower. Where data is finer than that, times are rounded to that
 resolution, so the assignment is optimal up to it; its cost is always
 re-evaluated exactly in floating point by the shared evaluator.
-Search (measured on issue 11's conformance sets by ``python -m bench.cpsat``,
-docs/benchmarks.md "CP-SAT configurations"): no LP relaxation but for
-sync_completion (``LINEARIZATION_LEVEL``), one worker unless the policy says
-otherwise, hinted by the caller.
+Search (measured on issue 11's conformance sets and generated warehouses by
+``python -m bench.cpsat``, docs/benchmarks.md "CP-SAT configurations"): no LP
+relaxation but for sync_completion (``LINEARIZATION_LEVEL``), no probing in
+presolve (``PROBING_LEVEL``), one worker unless the policy says otherwise, hinted
+by the caller.
 
 Determinism (measured the same way): the answer depends only on the problem,
 the hint and the seed when a proof ends the search, or when the search is
@@ -88,6 +89,14 @@ LINEARIZATION_LEVEL: dict[str, int] = {
     "sync_completion": 1,
     "avg_delay": 0,
 }
+# CP-SAT's probing in presolve (its default is 2). Probing cost ~1 s of presolve on a
+# 100-robot warehouse (3,898 conflicts) before the search from the hint began; without
+# it the search found the same first improvement 2.2 s sooner. Hinted by the first stage
+# (bench.cpsat, stage_lin0 vs stage_lin0_probe0): 12 generated warehouses of 50-100
+# robots, mean cost ratio 0.9415 -> 0.9515 at 3 s and 0.9714 -> 0.9967 at 5 s (level 1:
+# 0.9429 / 0.9773); the 25 conformance problems unchanged at 1, 3 and 5 s, the same
+# share proven at each; 100-robot worlds 0.7435 -> 1.0000 (wh_two_way) at 5 s.
+PROBING_LEVEL = 0
 # Deterministic time per second of the time limit in deterministic mode. CP-SAT did
 # 0.17 units per wall second of a one-worker search at linearization level 1, 0.22-0.28 at
 # level 0, on the benchmark machine (2-vCPU AMD EPYC; bench.cpsat, "dtime/s"): this uses
@@ -105,6 +114,10 @@ class ExactModel:
     following: list[cp_model.IntVar]  # (M,)
     scale: float
     linearization: int  # the LP relaxation level its objective searches best with
+
+    def tuning(self) -> dict[str, int]:
+        """The CP-SAT parameters this model searches best with (measured, see the module)."""
+        return {"linearization_level": self.linearization, "cp_model_probing_level": PROBING_LEVEL}
 
     def add_hint(self, assignments: Assignments) -> None:
         """Hint the first assignment of the batch (replacing earlier hints)."""
@@ -433,9 +446,7 @@ def search(
     ``SatParameters``, after the time limit, seed and workers (so it may override
     them), e.g. ``{"linearization_level": 2}``: what ``bench.cpsat`` compares.
     """
-    solver = _params(
-        time_limit_s, seed, workers, {"linearization_level": em.linearization, **(tuning or {})}
-    )
+    solver = _params(time_limit_s, seed, workers, {**em.tuning(), **(tuning or {})})
     callback = None if on_solution is None else _Incumbents(em, on_solution)
     status = solver.solve(em.model, callback)
     if status not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
@@ -467,7 +478,7 @@ def top_assignments(
         em.add_hint(hint)
     results: list[ExactResult] = []
     while len(results) < count:
-        solver = _params(time_limit_s, seed, workers, {"linearization_level": em.linearization})
+        solver = _params(time_limit_s, seed, workers, em.tuning())
         status = solver.solve(em.model)
         if status not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
             break

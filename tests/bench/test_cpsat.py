@@ -72,10 +72,16 @@ def test_quick_defaults_flags_and_variants() -> None:
     assert cfg == replace(Config(), variants=("lin2", "w2"), budgets=(2.0,), per_set=1)
     assert all(v.hint in ("fcfs", "stage", "none") for v in VARIANTS.values())
     assert VARIANTS["default"].linearization == 1  # explicit: the service's default moved
+    assert VARIANTS["default"].probing == 2 and VARIANTS["stage_lin0_probe0"].probing == 0
     cfg = config_from_args(
-        _parse_args(["--objective", "max_completion", "--worlds", "wh_two_way:25"]), Config(), QUICK
+        _parse_args(
+            ["--objective", "max_completion", "--worlds", "wh_two_way:25", "--per-world", "2"]
+        ),
+        Config(),
+        QUICK,
     )
     assert cfg.objective == "max_completion" and cfg.worlds == ("wh_two_way:25",)
+    assert cfg.per_world == 2
 
 
 def test_quick_run_writes_everything(tmp_path: Path) -> None:
