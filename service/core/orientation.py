@@ -51,8 +51,15 @@ def _reaches(
     conf_b: np.ndarray,
     seen: np.ndarray,
     stack: np.ndarray,
+    rank: np.ndarray,
 ) -> bool:
-    """Whether ``dst`` is reachable from ``src`` (orient (M,) int8: 1 a->b, 0 b->a, -1 unset)."""
+    """Whether ``dst`` is reachable from ``src`` (orient (M,) int8: 1 a->b, 0 b->a, -1 unset).
+
+    ``rank`` (V,) prunes the search: nodes ranked above ``dst`` are not entered. With the
+    positions of a topological order of the graph (or of a graph with more arcs) that
+    loses no path, since ranks increase along every path; all zeros prune nothing.
+    """
+    limit = rank[dst]
     seen[:] = False
     seen[src] = True
     stack[0] = src
@@ -63,7 +70,7 @@ def _reaches(
         if v == dst:
             return True
         w = succ[v]
-        if w >= 0 and not seen[w]:
+        if w >= 0 and not seen[w] and rank[w] <= limit:
             seen[w] = True
             stack[top] = w
             top += 1
@@ -76,11 +83,68 @@ def _reaches(
                 w = conf_a[e]
             else:
                 continue
-            if not seen[w]:
+            if not seen[w] and rank[w] <= limit:
                 seen[w] = True
                 stack[top] = w
                 top += 1
     return False
+
+
+@numba.njit(cache=True)
+def _topological_rank(
+    orient: np.ndarray,
+    succ: np.ndarray,
+    inc_start: np.ndarray,
+    inc_conf: np.ndarray,
+    conf_a: np.ndarray,
+    conf_b: np.ndarray,
+) -> np.ndarray:
+    """(V,) int64: each node's position in a topological order of the node graph (path arcs
+    plus the oriented conflicts; Kahn). All zeros if the graph has a cycle (then the
+    ranks prune nothing in :func:`_reaches`)."""
+    n_nodes = succ.size
+    indegree = np.zeros(n_nodes, dtype=np.int64)
+    for v in range(n_nodes):
+        if succ[v] >= 0:
+            indegree[succ[v]] += 1
+    for e in range(orient.size):
+        if orient[e] == 1:
+            indegree[conf_b[e]] += 1
+        elif orient[e] == 0:
+            indegree[conf_a[e]] += 1
+    queue = np.empty(n_nodes, dtype=np.int64)
+    tail = 0
+    for v in range(n_nodes):
+        if indegree[v] == 0:
+            queue[tail] = v
+            tail += 1
+    rank = np.zeros(n_nodes, dtype=np.int64)
+    head = 0
+    while head < tail:
+        v = queue[head]
+        rank[v] = head
+        head += 1
+        w = succ[v]
+        if w >= 0:
+            indegree[w] -= 1
+            if indegree[w] == 0:
+                queue[tail] = w
+                tail += 1
+        for k in range(inc_start[v], inc_start[v + 1]):
+            e = inc_conf[k]
+            if orient[e] == 1 and conf_a[e] == v:
+                w = conf_b[e]
+            elif orient[e] == 0 and conf_b[e] == v:
+                w = conf_a[e]
+            else:
+                continue
+            indegree[w] -= 1
+            if indegree[w] == 0:
+                queue[tail] = w
+                tail += 1
+    if head < n_nodes:
+        rank[:] = 0
+    return rank
 
 
 @numba.njit(cache=True)
@@ -101,11 +165,16 @@ def _moves_feasible(
     counts: np.ndarray,
     graph: tuple,
 ) -> np.ndarray:
-    """(K,) bool: which moves keep the assignment valid (see :meth:`OrientationGraph.feasible`)."""
+    """(K,) bool: which moves keep the assignment valid (see :meth:`OrientationGraph.feasible`).
+
+    One topological order of the (acyclic) assignment serves every direction check: a
+    path from v to u runs through nodes ranked between them only.
+    """
     budget, cq_start, cq_clique, succ, inc_start, inc_conf, conf_a, conf_b, base, ftype = graph
     n_nodes = succ.size
     seen = np.zeros(n_nodes, dtype=np.bool_)
     stack = np.empty(n_nodes, dtype=np.int64)
+    rank = _topological_rank(orient, succ, inc_start, inc_conf, conf_a, conf_b)
     out = np.zeros(moves.size, dtype=np.bool_)
     n_conf = orient.size
     for i in range(moves.size):
@@ -123,7 +192,7 @@ def _moves_feasible(
             old = orient[e]
             orient[e] = UNSET
             out[i] = not _reaches(
-                v, u, orient, succ, inc_start, inc_conf, conf_a, conf_b, seen, stack
+                v, u, orient, succ, inc_start, inc_conf, conf_a, conf_b, seen, stack, rank
             )
             orient[e] = old
     return out
@@ -157,6 +226,7 @@ def _enumerate(
     n_conf = order.size
     seen = np.zeros(succ.size, dtype=np.bool_)
     stack = np.empty(succ.size, dtype=np.int64)
+    no_rank = np.zeros(succ.size, dtype=np.int64)  # the partial orientation changes each step
     found = 0
     depth = state[n_conf]
     while depth >= 0 and found < out_a.shape[0]:
@@ -183,7 +253,7 @@ def _enumerate(
                 continue
             u, v = (conf_a[e], conf_b[e]) if a_first else (conf_b[e], conf_a[e])
             if base[e] == UNSET and _reaches(
-                v, u, orient, succ, inc_start, inc_conf, conf_a, conf_b, seen, stack
+                v, u, orient, succ, inc_start, inc_conf, conf_a, conf_b, seen, stack, no_rank
             ):
                 k = 4 if k >= 2 else 2  # this direction closes a cycle: skip both its types
                 continue
@@ -285,13 +355,22 @@ class OrientationGraph:
             p.fixed_type,
         )  # fmt: skip
 
-    def feasible(self, a_first: np.ndarray, following: np.ndarray, moves: np.ndarray) -> np.ndarray:
+    def feasible(
+        self,
+        a_first: np.ndarray,
+        following: np.ndarray,
+        moves: np.ndarray,
+        counts: np.ndarray | None = None,
+    ) -> np.ndarray:
         """Which single moves keep the valid assignment (a_first (M,), following (M,)) valid.
 
-        Move m < M reverses conflict m; move M + m flips conflict m's type.
+        Move m < M reverses conflict m; move M + m flips conflict m's type. ``counts``:
+        the assignment's following-type conflicts per clique (Q,), if the caller keeps them
+        (:meth:`count_type_move`; counting anew reads every clique incidence).
         Shapes: moves (K,) int -> (K,) bool.
         """
-        counts = self.cliques.following_counts(following[None])[0]  # (Q,)
+        if counts is None:
+            counts = self.cliques.following_counts(following[None])[0]  # (Q,)
         return _moves_feasible(
             np.asarray(moves, dtype=np.int64),
             a_first.astype(np.int8),
@@ -299,6 +378,12 @@ class OrientationGraph:
             counts,
             self.kernel_args(),
         )
+
+    def count_type_move(self, counts: np.ndarray, conflict: int, now_following: bool) -> None:
+        """Update ``counts`` (Q,) in place for ``conflict`` having turned following-type (or
+        exclusive, if not ``now_following``)."""
+        cliques = self.cq_clique[self.cq_start[conflict] : self.cq_start[conflict + 1]]
+        counts[cliques] += 1 if now_following else -1
 
     def enumerate(self, order: np.ndarray, prefer_a: np.ndarray, follow_first: bool) -> Enumeration:
         """Depth-first enumeration of every valid assignment (lazily, see :class:`Enumeration`).

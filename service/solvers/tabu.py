@@ -93,6 +93,7 @@ def tabu_search(
     evaluation = evaluate(start)
     best_cost = float(evaluation.costs[ctx.objective][0])
     binding = np.flatnonzero(ctx.evaluator.binding(start, evaluation))  # conflicts making waits
+    counts = ctx.cliques.following_counts(start.following)[0]  # (Q,) kept move by move
     tabu_until = np.zeros(ctx.problem.n_conflicts, dtype=np.int64)  # (M,) first free iteration
     stale, it = 0, 0
     while n_moves and it < cfg.max_iterations and stale < cfg.patience:
@@ -101,7 +102,7 @@ def tabu_search(
         it += 1
         stale += 1
         moves = _candidates(rng, binding, movable, cfg.moves)
-        moves = moves[graph.feasible(current.a_first[0], current.following[0], moves)]
+        moves = moves[graph.feasible(current.a_first[0], current.following[0], moves, counts)]
         if moves.size == 0:
             continue
         costs = neighbour_costs(current, evaluation, moves)[ctx.objective]  # (K,)
@@ -111,6 +112,8 @@ def tabu_search(
             continue
         k = int(np.flatnonzero(admissible)[np.argmin(costs[admissible])])
         current = apply_moves(current, moves[k : k + 1])
+        if moves[k] >= ctx.problem.n_conflicts:  # a type move
+            graph.count_type_move(counts, conflict[k], bool(current.following[0, conflict[k]]))
         evaluation = evaluate(current)  # the next base: its least delays and binding conflicts
         binding = np.flatnonzero(ctx.evaluator.binding(current, evaluation))
         tabu_until[conflict[k]] = it + cfg.tenure + rng.integers(cfg.tenure_spread + 1)

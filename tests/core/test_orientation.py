@@ -66,9 +66,13 @@ def test_first_leaves_of_a_large_problem_are_valid_and_distinct() -> None:
     assert check(graph.problem, graph.cliques, leaves).ok.all()
 
 
-@pytest.mark.parametrize("seed", range(6))
+@pytest.mark.parametrize("seed", range(8))
 def test_move_feasibility_agrees_with_the_checker(seed: int) -> None:
-    req = stitched_problem(seed, 15, 3.0) if seed % 2 else tiny_request(seed)
+    """Every single move of decoded assignments; the direction checks search only between
+    the two nodes' places in a topological order, which must lose no path: larger stitched
+    problems (robots of many nodes, long detours) check that."""
+    sizes = {1: 15, 3: 15, 5: 40, 7: 80}
+    req = stitched_problem(seed, sizes[seed], 3.0) if seed % 2 else tiny_request(seed)
     graph = _graph(req)
     problem, m = graph.problem, graph.problem.n_conflicts
     rng = np.random.default_rng(seed)
@@ -84,3 +88,28 @@ def test_move_feasibility_agrees_with_the_checker(seed: int) -> None:
         neighbours.following[m + conflict, conflict] ^= True
         expected = check(problem, graph.cliques, neighbours).ok
         assert graph.feasible(a_first, following, moves).tolist() == expected.tolist()
+
+
+def test_counts_kept_move_by_move_equal_a_fresh_count() -> None:
+    """Tabu keeps the clique counts with count_type_move instead of recounting: after a
+    walk of feasible type moves they equal a fresh count, and feasibility with them equals
+    feasibility without."""
+    graph = _graph(stitched_problem(2, 60, 4.0))
+    problem, m = graph.problem, graph.problem.n_conflicts
+    rng = np.random.default_rng(2)
+    start = Decoder(problem, graph.cliques).decode(
+        rng.exponential(size=(1, problem.n_nodes)) + 1e-3, rng.random((1, m))
+    )
+    a_first, following = start.a_first[0], start.following[0].copy()
+    counts = graph.cliques.following_counts(following[None])[0]
+    flips = 0
+    for _ in range(300):
+        moves = m + rng.choice(m, size=8, replace=False)
+        ok = graph.feasible(a_first, following, moves, counts)
+        assert ok.tolist() == graph.feasible(a_first, following, moves).tolist()
+        for move in moves[ok][:1]:
+            following[move - m] ^= True
+            graph.count_type_move(counts, move - m, bool(following[move - m]))
+            flips += 1
+    assert flips > 50
+    assert counts.tolist() == graph.cliques.following_counts(following[None])[0].tolist()
