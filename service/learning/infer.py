@@ -87,6 +87,7 @@ def propose_chunks(
     seed: int,
     rows: int,
     first: int | None = None,
+    scored: np.ndarray | None = None,
 ) -> Generator[tuple[np.ndarray, np.ndarray], float | None, None]:
     """Bids and following probabilities of ``samples`` draws, ``rows`` draws at a time.
 
@@ -100,6 +101,8 @@ def propose_chunks(
     chunk is asked for; the random draws do not depend on ``rows``. The first chunk
     has ``first`` draws (default ``rows``); ``send(n)`` instead of ``next()`` asks
     for a next chunk of n draws, at most ``rows`` (a time-sized chunk).
+    ``scored`` (M',) int: the only conflicts whose probability is computed (the ones the
+    decoder reads, :meth:`Decoder.scored`); the others get 0. Default: all.
 
     Shapes: -> per chunk of n draws: bids (n, V) float64 > 0, probabilities (n, M) float64.
     """
@@ -108,13 +111,17 @@ def propose_chunks(
     z = torch.randn(samples, model.config.latent, generator=gen) * ladder  # (S, Z)
     noise = torch.randn(samples, graph.x.shape[0], generator=gen) * (BID_NOISE * ladder)  # (S, V)
     h = model.embed(graph.x, graph.edge_index, graph.edge_attr)  # (V, H)
-    conf = graph.conf.T.contiguous()
+    n_conf = graph.conf.shape[0]
+    scored = np.arange(n_conf) if scored is None else scored  # (M',)
+    conf = graph.conf[torch.from_numpy(scored)].T.contiguous()  # (2, M')
     lo, n = 0, rows if first is None else max(1, min(first, rows))
     while lo < samples:
-        bids, logits = model.sample_heads(h, conf, z[lo : lo + n])  # (n, V), (n, M)
+        bids, logits = model.sample_heads(h, conf, z[lo : lo + n])  # (n, V), (n, M')
         bids = bids * noise[lo : lo + n].exp()
         lo += n
-        asked = yield bids.double().numpy(), torch.sigmoid(logits).double().numpy()
+        probs = np.zeros((len(bids), n_conf))  # (n, M)
+        probs[:, scored] = torch.sigmoid(logits).double().numpy()
+        asked = yield bids.double().numpy(), probs
         n = rows if asked is None else max(1, min(int(asked), rows))
 
 
@@ -144,7 +151,7 @@ def sample_best(
     rows = chunk_rows(decoder.problem, model.config.hidden)
     timed = deadline is not None
     first = FIRST_TIMED_ROWS if timed else None
-    chunks = propose_chunks(model, graph, samples, seed, rows, first)
+    chunks = propose_chunks(model, graph, samples, seed, rows, first, decoder.scored())
     best: tuple[float, int, Assignments] | None = None
     decoded, started = 0, time.monotonic()
     bids, probs = next(chunks)

@@ -23,7 +23,7 @@ from service.datagen.build import DatasetConfig, build_dataset, solve_problem
 from service.learning.dataset import examples_from_records, to_data
 from service.learning.features import NODE_DIM, graph_tensors
 from service.learning.generate import GeneratorConfig, small_problem, stitched_problem
-from service.learning.infer import propose, sample_best
+from service.learning.infer import propose, propose_chunks, sample_best
 from service.learning.model import GnnVae, GnnVaeConfig
 from service.learning.store import ModelLoadError, load_all, load_model, save_model
 from service.learning.train import WEIGHTS, TrainConfig, loss_terms, train
@@ -113,6 +113,34 @@ def test_decoded_samples_are_always_valid(seed: int, z_seed: int, big: bool) -> 
     for objective in OBJECTIVES:
         candidates = decode_candidates(Decoder(problem, cliques), bids, probs, objective)
         assert check(problem, cliques, candidates).ok.all()
+
+
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 10_000), objective=st.sampled_from(OBJECTIVES))
+def test_scoring_only_the_conflicts_the_decoder_reads_decodes_the_same(
+    seed: int, objective: str
+) -> None:
+    """sample_best runs the edge head on Decoder.scored() only: the decoded samples are
+    those of all conflicts' probabilities, and some conflicts are left out (zero budget)."""
+    problem, cliques = _problem(stitched_problem(seed, 30, 4.0))
+    decoder = Decoder(problem, cliques)
+    scored = decoder.scored()
+    torch.manual_seed(seed)
+    model, graph = GnnVae(TINY).eval(), graph_tensors(problem, cliques)
+    bids, probs = propose(model, graph, 8, seed=seed)
+    bids_s, probs_s = next(propose_chunks(model, graph, 8, seed, rows=8, scored=scored))
+    assert np.array_equal(bids, bids_s)
+    assert np.allclose(probs[:, scored], probs_s[:, scored], rtol=1e-6, atol=1e-9)
+    assert not probs_s[:, np.setdiff1d(np.arange(problem.n_conflicts), scored)].any()
+    full = decode_candidates(decoder, bids, probs, objective)
+    cut = decode_candidates(decoder, bids_s, probs_s, objective)
+    assert np.array_equal(full.a_first, cut.a_first)
+    assert np.array_equal(full.following, cut.following)
+
+
+def test_some_conflicts_go_unscored_on_a_dense_graph() -> None:
+    problem, cliques = _problem(stitched_problem(3, 30, 4.0))
+    assert 0 < Decoder(problem, cliques).scored().size < problem.n_conflicts
 
 
 def test_inference_is_deterministic_for_a_seed() -> None:
