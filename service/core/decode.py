@@ -114,7 +114,8 @@ def bids_from_ranks(problem: Problem, ranks: np.ndarray) -> np.ndarray:
 
 @numba.njit(cache=True, nogil=True)
 def _greedy_kernel(
-    order: np.ndarray,  # (S, B) int, each sample's bound conflicts, best score first
+    order: np.ndarray,  # (S, B') int, each sample's bound conflicts that may be candidates,
+    # best score first (as positions 0..B-1)
     cand: np.ndarray,  # (S, B) bool, candidates for following-type
     start: np.ndarray,  # (B+1,) int, bound conflict b's cliques are cliques[start[b]:start[b+1]]
     cliques: np.ndarray,  # (E',) int, binding cliques of the bound conflicts
@@ -126,7 +127,7 @@ def _greedy_kernel(
     on 250-robot path graphs (tens of thousands of bound conflicts).
     """
     n_samples, n_bound = order.shape
-    chosen = np.zeros((n_samples, n_bound), dtype=np.bool_)
+    chosen = np.zeros(cand.shape, dtype=np.bool_)
     left = np.empty_like(budget)
     for s in range(n_samples):
         left[:] = budget
@@ -266,8 +267,11 @@ class Decoder:
     def _greedy(self, scores: np.ndarray, candidate: np.ndarray) -> np.ndarray:
         """Greedy budgeted choice over the binding conflicts -> (S, B) bool."""
         bound = self._bound_edges
+        # Only those that can be candidates are sorted (a forbidden or fixed-exclusive
+        # conflict never is): half of them on two-way warehouses.
+        may = np.flatnonzero(~self._forbidden[bound] & (self.problem.fixed_type[bound] != 0))
         # Descending score, ties by conflict index (stable sort of the negated score).
-        order = np.argsort(-scores[:, bound], axis=1, kind="stable")  # (S, B)
+        order = may[np.argsort(-scores[:, bound[may]], axis=1, kind="stable")]  # (S, B')
         cand = np.ascontiguousarray(candidate[:, bound])
         return _greedy_kernel(
             order, cand, self._bound_start, self._bound_cliques, self.cliques.budget

@@ -18,7 +18,7 @@ from service.core.cliques import Cliques, find_cliques
 from service.core.decode import Decoder, bids_from_ranks
 from service.core.problem import Problem, problem_from_request
 from service.core.schemas import ScheduleRequest
-from service.learning.generate import small_problem
+from service.learning.generate import small_problem, stitched_problem
 from tests.reference import density_groups, density_ok, is_acyclic, reference_problem, tiny_request
 
 SEEDS = st.integers(min_value=0, max_value=400)
@@ -249,3 +249,44 @@ def test_a_conflict_in_thousands_of_cliques_costs_memory_in_proportion() -> None
     # Density 2 allows 2 following conflicts per clique: u-v takes one in all of them.
     counts = cliques.following_counts(out.following)[0]
     assert counts.max() <= 2
+
+
+def _greedy_types(problem: Problem, cliques: Cliques, scores: np.ndarray) -> np.ndarray:
+    """Reference for Decoder.types, one sample, plainly: every conflict by descending
+    score (ties: lower index; fixed following-type first), following-type when it may be
+    (not in a zero-budget clique, type not fixed exclusive, a score) and every clique
+    holding it has budget left."""
+    m = problem.n_conflicts
+    key = np.where(problem.fixed_type == 1, np.inf, scores)
+    holding: list[list[int]] = [[] for _ in range(m)]
+    for q in range(cliques.budget.size):
+        for e in cliques.edge[cliques.start[q] : cliques.start[q + 1]]:
+            holding[e].append(q)
+    left = cliques.budget.copy()
+    out = np.zeros(m, dtype=bool)
+    for e in sorted(range(m), key=lambda e: (-key[e] if not np.isnan(key[e]) else 0.0, e)):
+        if np.isnan(key[e]) or problem.fixed_type[e] == 0:
+            continue
+        if all(left[q] > 0 for q in holding[e]):
+            out[e] = True
+            for q in holding[e]:
+                left[q] -= 1
+    return out
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 10_000), density=st.sampled_from([2.0, 4.0]))
+def test_types_fill_budgets_greedily_by_score(seed: int, density: float) -> None:
+    """Decoder.types sorts only the conflicts that can be candidates: the same choice as
+    the plain greedy over all of them, NaN scores never chosen."""
+    problem = problem_from_request(
+        ScheduleRequest.model_validate(stitched_problem(seed, 25, density))
+    )
+    cliques = find_cliques(problem)
+    rng = np.random.default_rng(seed)
+    scores = rng.random((3, problem.n_conflicts))
+    scores[2, rng.random(problem.n_conflicts) < 0.3] = np.nan
+    scores[1] = np.round(scores[1], 1)  # ties
+    got = Decoder(problem, cliques).types(scores)
+    for s in range(3):
+        assert got[s].tolist() == _greedy_types(problem, cliques, scores[s]).tolist(), s
