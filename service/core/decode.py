@@ -165,7 +165,8 @@ class Decoder:
     def scored(self) -> np.ndarray:
         """(M',) int: the conflicts whose score :meth:`types` reads: those free to be
         following-type (no zero budget forbids it, no fixed type). Any score elsewhere is
-        ignored, so a model need not compute it (44-88 % of them are read on 250-robot warehouses)."""
+        ignored, so a model need not compute it (44-88 % of the conflicts are read on
+        250-robot warehouses)."""
         return np.flatnonzero(~self._forbidden & (self.problem.fixed_type < 0))
 
     def for_problem(self, problem: Problem) -> Decoder:
