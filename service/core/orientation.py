@@ -39,6 +39,16 @@ __all__ = ["Enumeration", "OrientationGraph", "csr"]
 UNSET = -1  # orientation of a conflict not decided yet (backtracking)
 
 
+@numba.njit(cache=True, inline="always")
+def _leads_to(e: int, v: int, orient: np.ndarray, conf_a: np.ndarray, conf_b: np.ndarray) -> int:
+    """The node conflict ``e``'s arc leads to from node ``v``, or -1 (not oriented out of v)."""
+    if orient[e] == 1 and conf_a[e] == v:
+        return conf_b[e]
+    if orient[e] == 0 and conf_b[e] == v:
+        return conf_a[e]
+    return -1
+
+
 @numba.njit(cache=True)
 def _reaches(
     src: int,
@@ -75,15 +85,8 @@ def _reaches(
             stack[top] = w
             top += 1
         for k in range(inc_start[v], inc_start[v + 1]):
-            e = inc_conf[k]
-            o = orient[e]
-            if o == 1 and conf_a[e] == v:
-                w = conf_b[e]
-            elif o == 0 and conf_b[e] == v:
-                w = conf_a[e]
-            else:
-                continue
-            if not seen[w] and rank[w] <= limit:
+            w = _leads_to(inc_conf[k], v, orient, conf_a, conf_b)
+            if w >= 0 and not seen[w] and rank[w] <= limit:
                 seen[w] = True
                 stack[top] = w
                 top += 1
@@ -131,12 +134,8 @@ def _topological_rank(
                 queue[tail] = w
                 tail += 1
         for k in range(inc_start[v], inc_start[v + 1]):
-            e = inc_conf[k]
-            if orient[e] == 1 and conf_a[e] == v:
-                w = conf_b[e]
-            elif orient[e] == 0 and conf_b[e] == v:
-                w = conf_a[e]
-            else:
+            w = _leads_to(inc_conf[k], v, orient, conf_a, conf_b)
+            if w < 0:
                 continue
             indegree[w] -= 1
             if indegree[w] == 0:
