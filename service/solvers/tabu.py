@@ -7,7 +7,8 @@ turning following-type fits every clique's budget), so every visited
 assignment is valid. Each iteration
 draws a candidate list of ``moves`` moves, evaluates its feasible ones in one
 call (incrementally: :class:`IncrementalEvaluator` recomputes only what lies
-downstream of each moved conflict) and takes the best admissible one, even if
+downstream of each moved conflict, and stops on a move once it costs more than the
+best admissible one so far) and takes the best admissible one, even if
 it is worse than the current assignment (that is what lets tabu search leave
 local optima). The
 list holds the moves of *binding* conflicts first (those whose constraint is
@@ -85,7 +86,7 @@ def tabu_search(
     rng = np.random.default_rng(ctx.seed if seed is None else seed)
     graph = ctx.orientation
     evaluate = ctx.evaluator.evaluate
-    neighbour_costs = IncrementalEvaluator(ctx.evaluator).costs
+    best_move = IncrementalEvaluator(ctx.evaluator).best_move
     n_moves = 2 * ctx.problem.n_conflicts
     p = ctx.problem
     movable = np.concatenate([p.forced == 0, p.fixed_type < 0])  # (2M,) flips, then type moves
@@ -105,12 +106,13 @@ def tabu_search(
         moves = moves[graph.feasible(current.a_first[0], current.following[0], moves, counts)]
         if moves.size == 0:
             continue
-        costs = neighbour_costs(current, evaluation, moves)[ctx.objective]  # (K,)
         conflict = moves % ctx.problem.n_conflicts
-        admissible = (tabu_until[conflict] <= it) | (costs < best_cost)
-        if not admissible.any():
+        chosen = best_move(
+            current, evaluation, moves, ctx.objective, tabu_until[conflict] > it, best_cost
+        )
+        if chosen is None:  # every move tabu, none better than the best
             continue
-        k = int(np.flatnonzero(admissible)[np.argmin(costs[admissible])])
+        k = chosen[0]
         current = apply_moves(current, moves[k : k + 1])
         if moves[k] >= ctx.problem.n_conflicts:  # a type move
             graph.count_type_move(counts, conflict[k], bool(current.following[0, conflict[k]]))

@@ -190,3 +190,61 @@ def test_a_250_robot_graph_from_fcfs() -> None:
     moves = moves[:100]
     got = IncrementalEvaluator(ctx.evaluator).costs(base, evaluation, moves)
     _assert_equal_costs(got, ctx.evaluator.evaluate(apply_moves(base, moves)).costs)
+
+
+def _rule(costs: np.ndarray, tabu: np.ndarray, best: float) -> tuple[int, float] | None:
+    """Tabu search's rule on full costs: the cheapest admissible move, first on ties."""
+    admissible = ~tabu | (costs < best)
+    if not admissible.any():
+        return None
+    k = int(np.flatnonzero(admissible)[np.argmin(costs[admissible])])
+    return k, float(costs[k])
+
+
+@settings(max_examples=80, deadline=None, derandomize=True)
+@given(
+    kind=KINDS,
+    seed=SEEDS,
+    draw=DRAWS,
+    objective=st.sampled_from(OBJECTIVES),
+    tabu_share=st.sampled_from([0.0, 0.5, 1.0]),
+    best_shift=st.sampled_from([-0.05, 0.0, 0.05, np.inf]),
+)
+def test_best_move_chooses_what_costing_every_move_would(
+    kind: str, seed: int, draw: int, objective: str, tabu_share: float, best_shift: float
+) -> None:
+    """best_move stops costing moves that cannot win (weighted-sum objectives); its choice
+    and cost are the rule's on every move's full cost, also with every move tabu and a
+    best cost below, at or above the base's (aspiration)."""
+    decoder, incremental, graph = _setup(kind, seed)
+    base = _decoded(decoder, draw)
+    rng = np.random.default_rng(draw)
+    moves = rng.permutation(2 * decoder.problem.n_conflicts)[:64]
+    moves = moves[graph.feasible(base.a_first[0], base.following[0], moves)]
+    evaluation = incremental.evaluator.evaluate(base)
+    tabu = rng.random(moves.size) < tabu_share
+    cost = float(evaluation.costs[objective][0])
+    best = cost * (1.0 + best_shift) if np.isfinite(best_shift) else np.inf
+    want = _rule(incremental.costs(base, evaluation, moves)[objective], tabu, best)
+    got = incremental.best_move(base, evaluation, moves, objective, tabu, best)
+    if want is None:
+        assert got is None
+    else:
+        assert got is not None and got[0] == want[0]
+        assert got[1] == pytest.approx(want[1], rel=1e-12)
+
+
+def test_best_move_leaves_losing_moves_uncosted_on_a_congested_graph() -> None:
+    """The cutoff does cut: on a dense stitched graph most moves stop early."""
+    problem = _problem(stitched_problem(5, 60, 4.0))
+    cliques = find_cliques(problem)
+    incremental = IncrementalEvaluator(Evaluator(problem))
+    base = fcfs(SolveContext(problem, "avg_completion", 1.0)).assignment
+    graph = OrientationGraph(problem, cliques)
+    moves = np.arange(2 * problem.n_conflicts)
+    moves = moves[graph.feasible(base.a_first[0], base.following[0], moves)]
+    evaluation = incremental.evaluator.evaluate(base)
+    tabu = np.zeros(moves.size, dtype=bool)
+    weight = incremental._last_weight
+    _, cut = incremental._costs(base, evaluation, moves, 0, (weight, tabu, np.inf, 1e-9))
+    assert moves.size > 20 and cut.mean() > 0.3
