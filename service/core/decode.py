@@ -167,7 +167,12 @@ class Decoder:
         following-type (no zero budget forbids it, no fixed type). Any score elsewhere is
         ignored, so a model need not compute it (44-88 % of the conflicts are read on
         250-robot warehouses)."""
-        return np.flatnonzero(~self._forbidden & (self.problem.fixed_type < 0))
+        return np.flatnonzero(self._may_follow() & (self.problem.fixed_type < 0))
+
+    def _may_follow(self) -> np.ndarray:
+        """(M,) bool: conflicts that can be following-type at all: in no zero-budget clique
+        and not fixed exclusive (a re-schedule's realized conflicts)."""
+        return ~self._forbidden & (self.problem.fixed_type != 0)
 
     def for_problem(self, problem: Problem) -> Decoder:
         """This decoder for another problem on the same graph and cliques (a re-schedule's
@@ -255,22 +260,24 @@ class Decoder:
         Only conflicts scoring above ``threshold`` are candidates (all, if None).
         """
         scores = np.atleast_2d(np.asarray(scores, dtype=np.float64))
-        fixed = self.problem.fixed_type  # (M,) realized types come first, or never
-        scores = np.where(fixed == 1, np.inf, scores)
-        candidate = ~self._forbidden & ~np.isnan(scores) & (fixed != 0)
+        # Realized types come first, or never.
+        scores = np.where(self.problem.fixed_type == 1, np.inf, scores)
+        may_follow = self._may_follow()  # (M,)
+        candidate = may_follow & ~np.isnan(scores)
         if threshold is not None:
             candidate &= scores > threshold
         following = candidate.copy()
         if self._bound_edges.size:
-            following[:, self._bound_edges] = self._greedy(scores, candidate)
+            following[:, self._bound_edges] = self._greedy(scores, candidate, may_follow)
         return following
 
-    def _greedy(self, scores: np.ndarray, candidate: np.ndarray) -> np.ndarray:
+    def _greedy(
+        self, scores: np.ndarray, candidate: np.ndarray, may_follow: np.ndarray
+    ) -> np.ndarray:
         """Greedy budgeted choice over the binding conflicts -> (S, B) bool."""
         bound = self._bound_edges
-        # Only those that can be candidates are sorted (a forbidden or fixed-exclusive
-        # conflict never is): half of them on two-way warehouses.
-        may = np.flatnonzero(~self._forbidden[bound] & (self.problem.fixed_type[bound] != 0))
+        # Only those that can be candidates are sorted: half of them on two-way warehouses.
+        may = np.flatnonzero(may_follow[bound])  # (B',) positions in bound
         # Descending score, ties by conflict index (stable sort of the negated score).
         order = may[np.argsort(-scores[:, bound[may]], axis=1, kind="stable")]  # (S, B')
         cand = np.ascontiguousarray(candidate[:, bound])

@@ -386,11 +386,14 @@ class IncrementalEvaluator:
             chain_next, chain_prev, graph.target, graph.source, graph.offset, graph.live,
             last_robot, problem.tp_time[problem.last_tp], graph.delay_weight,
         )  # fmt: skip
-        # Weights of a delay change in the cost (best_move's cutoff), (E+1,): the sum of
-        # completions moves with robots' last events, avg_delay with its own weights.
-        self._n_robots = float(problem.n_robots)
+        # best_move's cutoff for the costs that are weighted sums of delay changes: per
+        # objective (cost units per weighted change, weights (E+1,)). The sum of
+        # completions moves with robots' last events; avg_delay has its own weights.
         self._last_weight = (last_robot >= 0).astype(np.float64)
-        self._delay_weight = np.asarray(graph.delay_weight, dtype=np.float64)
+        self._cut_weights = {
+            "avg_completion": (float(problem.n_robots), self._last_weight),
+            "avg_delay": (1.0, np.asarray(graph.delay_weight, dtype=np.float64)),
+        }
         self._no_weight = np.zeros(n_events + 1)
 
     def costs(
@@ -430,14 +433,13 @@ class IncrementalEvaluator:
         """
         moves = np.asarray(moves, dtype=np.int64)
         cost = float(evaluation.costs[objective][0])
-        scale = {"avg_completion": self._n_robots, "avg_delay": 1.0}.get(objective)
-        weight = {"avg_completion": self._last_weight, "avg_delay": self._delay_weight}
-        if scale is None:  # not a weighted sum of delays: cost every move whole
+        if objective not in self._cut_weights:  # not a weighted sum: cost every move whole
             cutoff = (self._no_weight, tabu, np.inf, 0.0)
         else:
+            scale, weight = self._cut_weights[objective]
             best_change = scale * (best_cost - cost)
             tol = 1e-9 * (1.0 + scale * abs(cost) + abs(best_change))
-            cutoff = (weight[objective], tabu, best_change, tol)
+            cutoff = (weight, tabu, best_change, tol)
         costs, cut = self._costs(base, evaluation, moves, 0, cutoff)
         found = np.where(cut, np.inf, costs[objective])  # (K,)
         admissible = ~tabu | (found < best_cost)
