@@ -57,6 +57,7 @@ from service.core.evaluate import Evaluator
 from service.core.schemas import OBJECTIVES
 from service.learning.generate import GeneratorConfig
 from service.learning.store import StoredModel, load_all
+from service.memory import settle
 from service.solvers.dispatch import DispatchPolicy  # noqa: F401  (registers every solver)
 from service.solvers.exact import solve
 from service.solvers.registry import SolveContext, get_solver
@@ -285,6 +286,7 @@ def run(cfg: Config, progress: bool = True) -> dict[str, Any]:
     refs = ReferenceCache(cfg.cache, cfg.ref_limit_s)
     cases = _cases(cfg, refs, progress)
     warm_up(cfg, models)
+    settle()  # as the service once warm (service.memory): the cases escape full collections
     rows: list[dict[str, Any]] = []
     compared: list[list[dict[str, Any]]] = []  # per case, every method's result
     for case in tqdm(cases, desc="methods", unit="problem", disable=not progress):

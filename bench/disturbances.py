@@ -56,6 +56,7 @@ from service.core.problem import ErrorItem, ProblemError
 from service.core.schemas import PreviousConflictIn, ProgressIn, ScheduleRequest, ScheduleResponse
 from service.geometry.graph import CoordinationGraph, GeometrySettings
 from service.learning.store import load_all
+from service.memory import settle
 from service.motion.plan import derive
 from service.motion.replan import Solve, execute_rescheduled, plan_of
 from service.motion.trajectories import trajectories
@@ -300,6 +301,7 @@ def run(cfg: Config, progress: bool = True) -> dict[str, Any]:
         "load_avg_1min_start": os.getloadavg()[0],
     }
     warm_up(cfg, policy)
+    settle()  # as the service once warm (service.memory): the cases escape full collections
     worlds = [(kind, n) for n in cfg.sizes for kind in cfg.kinds]
     total = sum(runs_of(cfg, n) for _, n in worlds)
     rows: list[dict[str, Any]] = []

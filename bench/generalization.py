@@ -80,6 +80,7 @@ from bench.report import (
 from service.core.cliques import TooManyCliques
 from service.core.schemas import OBJECTIVES
 from service.learning.store import METADATA, ModelLoadError, StoredModel, load_model, load_model_dir
+from service.memory import settle
 from service.scenarios import HELD_OUT, KINDS
 from service.solvers.dispatch import DispatchPolicy, dispatch
 
@@ -303,6 +304,7 @@ def run(cfg: Config, progress: bool = True) -> dict[str, Any]:
     smallest = min(worlds, key=lambda w: w.case.problem.n_conflicts)
     for label, solver, model in methods:  # compiling and first calls are not timed
         run_method(label, solver, smallest, cfg, by_model[model])
+    settle()  # as the service once warm (service.memory): the cases escape full collections
     rows, problems = [], []
     for world, ref in tqdm(
         list(zip(worlds, refs, strict=True)), desc="methods", unit="problem", disable=not progress

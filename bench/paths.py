@@ -65,6 +65,7 @@ from service.core.schemas import OBJECTIVES
 from service.geometry.graph import GeometrySettings
 from service.geometry.paths import RobotPath
 from service.learning.store import load_all
+from service.memory import settle
 from service.motion.plan import plan_paths
 from service.scenarios import KINDS, World, generate
 from service.simulation.clearance import Trajectory, check_clearance
@@ -315,6 +316,7 @@ def run(cfg: Config, progress: bool = True) -> dict[str, Any]:
     changes = _service_changes()
     load_start = os.getloadavg()[0]  # the machine is shared: other work inflates every time
     warm_up(cfg, policy)
+    settle()  # as the service once warm (service.memory): the cases escape full collections
     cases = world_cases(cfg)
     references(cases, cfg, policy, progress)
     rows: list[dict[str, Any]] = []

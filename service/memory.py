@@ -58,7 +58,11 @@ def collection_deferred() -> Iterator[None]:
 
 
 def settle() -> None:
-    """Freeze everything alive now and make full collections rarer (see the module)."""
+    """Freeze everything alive now and make full collections rarer (see the module).
+
+    Garbage is collected first: a cycle frozen while unreachable would never be freed.
+    """
+    gc.collect()
     gc.freeze()
     young, middle, _ = gc.get_threshold()
     gc.set_threshold(young, middle, FULL_AFTER)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import gc
 import threading
+import weakref
 
 import pytest
 
@@ -62,5 +63,24 @@ def test_settle_freezes_what_lives_and_makes_full_collections_rarer() -> None:
         assert gc.get_freeze_count() >= frozen + len(alive)
         assert gc.get_threshold() == (before[0], before[1], FULL_AFTER)
     finally:
+        gc.unfreeze()
+        gc.set_threshold(*before)
+
+
+def test_settle_collects_garbage_before_freezing() -> None:
+    class Node:
+        pass
+
+    before = gc.get_threshold()
+    cycle = Node()
+    cycle.me = cycle  # unreachable once deleted: only the cyclic collector frees it
+    ref = weakref.ref(cycle)
+    del cycle
+    gc.disable()
+    try:
+        settle()
+        assert ref() is None
+    finally:
+        gc.enable()
         gc.unfreeze()
         gc.set_threshold(*before)
