@@ -187,7 +187,7 @@ def run(cfg: Config, progress: bool = True) -> dict[str, Any]:
     cases = cases_of(cfg)
     policy = service_policy(cfg.store)
     warm_up(cfg, min(cases, key=lambda c: c.problem.n_conflicts), policy)
-    settle()  # as the service once warm (service.memory): the cases escape full collections
+    settle()  # the service's collector policy once warm: the cases held escape full collections
     rows: list[dict[str, Any]] = []
     for case in tqdm(cases, desc="anytime", unit="problem", disable=not progress):
         found = [

@@ -286,7 +286,7 @@ def run(cfg: Config, progress: bool = True) -> dict[str, Any]:
     refs = ReferenceCache(cfg.cache, cfg.ref_limit_s)
     cases = _cases(cfg, refs, progress)
     warm_up(cfg, models)
-    settle()  # as the service once warm (service.memory): the cases escape full collections
+    settle()  # the service's collector policy once warm: the cases held escape full collections
     rows: list[dict[str, Any]] = []
     compared: list[list[dict[str, Any]]] = []  # per case, every method's result
     for case in tqdm(cases, desc="methods", unit="problem", disable=not progress):

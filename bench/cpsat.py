@@ -323,7 +323,7 @@ def run(cfg: Config, progress: bool = True) -> dict[str, Any]:
     )
     models = service_policy(cfg.store).models
     warm_up(cfg, min(cases, key=lambda c: c.problem.n_conflicts), models)
-    settle()  # as the service once warm (service.memory): the cases escape full collections
+    settle()  # the service's collector policy once warm: the cases held escape full collections
     rows: list[dict[str, Any]] = []
     for case in tqdm(cases, desc="cpsat", unit="problem", disable=not progress):
         # Side by side per problem: drifts of the machine's load hit every variant alike.

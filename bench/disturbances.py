@@ -301,7 +301,7 @@ def run(cfg: Config, progress: bool = True) -> dict[str, Any]:
         "load_avg_1min_start": os.getloadavg()[0],
     }
     warm_up(cfg, policy)
-    settle()  # as the service once warm (service.memory): the cases escape full collections
+    settle()  # the service's collector policy once warm (service.memory)
     worlds = [(kind, n) for n in cfg.sizes for kind in cfg.kinds]
     total = sum(runs_of(cfg, n) for _, n in worlds)
     rows: list[dict[str, Any]] = []

@@ -304,7 +304,7 @@ def run(cfg: Config, progress: bool = True) -> dict[str, Any]:
     smallest = min(worlds, key=lambda w: w.case.problem.n_conflicts)
     for label, solver, model in methods:  # compiling and first calls are not timed
         run_method(label, solver, smallest, cfg, by_model[model])
-    settle()  # as the service once warm (service.memory): the cases escape full collections
+    settle()  # the service's collector policy once warm: the cases held escape full collections
     rows, problems = [], []
     for world, ref in tqdm(
         list(zip(worlds, refs, strict=True)), desc="methods", unit="problem", disable=not progress

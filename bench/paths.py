@@ -316,7 +316,7 @@ def run(cfg: Config, progress: bool = True) -> dict[str, Any]:
     changes = _service_changes()
     load_start = os.getloadavg()[0]  # the machine is shared: other work inflates every time
     warm_up(cfg, policy)
-    settle()  # as the service once warm (service.memory): the cases escape full collections
+    settle()  # the service's collector policy once warm (service.memory)
     cases = world_cases(cfg)
     references(cases, cfg, policy, progress)
     rows: list[dict[str, Any]] = []
