@@ -21,7 +21,11 @@ checked) instead of random ones; the model flags may then be left out (given,
 they must match). ``--max-gap G`` trains only on targets whose recorded relative
 gap to CP-SAT's bound is at most G (proven optima have 0), ``--proven-only`` also
 drops targets of unknown gap (:class:`service.learning.dataset.TargetFilter`);
-validation problems keep every target. The result is saved as ``--version`` and,
+validation problems keep every target. ``--max-gap`` takes one gap for every dataset or
+one per ``--data`` folder, ``none`` for any gap: a CP-SAT gap means little where its
+bound is weak (50-100 robots), so labels of a longer solve may be kept whatever their
+gap while 1-s labels are filtered, e.g. ``--data data/scenario-v1
+data/scenario-large-v1 --max-gap 0.05 none``. The result is saved as ``--version`` and,
 as every trained model, becomes the store's default: train candidates into their
 own ``--store`` and compare them with ``python -m bench.generalization --candidate``.
 """
@@ -31,6 +35,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -165,18 +170,20 @@ def train(
     n_train: int | None,
     n_val: int,
     init: StoredModel | None = None,
-    keep: TargetFilter = KEEP_ALL,
+    keep: TargetFilter | Sequence[TargetFilter] = KEEP_ALL,
 ) -> dict[str, Any]:
     """Train (or resume) and return the best epoch's validation figures and state.
 
     ``init``: the model to start from (None: random weights); ``keep``: which targets of
-    the training problems to train on (validation problems keep all of theirs).
+    the training problems to train on, one filter for every dataset or one per dataset
+    (validation problems keep all of theirs).
     """
+    keeps = per_dataset(keep, len(data))
     torch.manual_seed(cfg.seed)
     train_ex, val_ex = [], []
-    for path in data:  # the last n_val problems of every dataset are held out
+    for path, kept in zip(data, keeps, strict=True):  # the last n_val of each are held out
         records = list(iter_problems(path, None if n_train is None else n_train + n_val))
-        train_ex += examples_from_records(records[:-n_val], objective, cfg.targets, keep)
+        train_ex += examples_from_records(records[:-n_val], objective, cfg.targets, kept)
         val_ex += examples_from_records(records[-n_val:], objective)
     model = initial_model(model_cfg, init)
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
@@ -188,8 +195,8 @@ def train(
     # Named only when used, so that checkpoints from before these options still resume.
     if init is not None:
         setup["init"] = init_record(init)
-    if keep != KEEP_ALL:
-        setup["target_filter"] = asdict(keep)
+    if any(k != KEEP_ALL for k in keeps):
+        setup["target_filter"] = filter_record(keeps)
     state: dict[str, Any] = {
         "setup": setup,
         "epoch": 0,
@@ -231,6 +238,32 @@ def train(
     return {"model": model, "state": state}
 
 
+def per_dataset(keep: TargetFilter | Sequence[TargetFilter], n: int) -> list[TargetFilter]:
+    """One filter per dataset: ``keep`` repeated, or ``keep`` itself if it has ``n``."""
+    keeps = [keep] * n if isinstance(keep, TargetFilter) else list(keep)
+    if len(keeps) != n:
+        raise ValueError(f"{len(keeps)} target filters for {n} datasets")
+    return keeps
+
+
+def filter_record(keeps: Sequence[TargetFilter]) -> dict[str, Any] | list[dict[str, Any]]:
+    """How checkpoints and manifests name the filters: one dict when they are all the same
+    (as before per-dataset filters existed), else one per dataset."""
+    if all(k == keeps[0] for k in keeps):
+        return asdict(keeps[0])
+    return [asdict(k) for k in keeps]
+
+
+def _gap(text: str) -> float | None:
+    """A ``--max-gap`` value: a relative gap >= 0, or ``none`` (any gap)."""
+    if text.lower() == "none":
+        return None
+    gap = float(text)
+    if not gap >= 0:
+        raise argparse.ArgumentTypeError(f"a gap is >= 0 or 'none', not {text}")
+    return gap
+
+
 def _parser() -> argparse.ArgumentParser:
     """The training flags; the model's (``--hidden`` ...) and the optimizer's from their configs."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -247,7 +280,14 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--val", type=int, default=300)
     p.add_argument("--threads", type=int, default=None, help="torch threads (default: torch's)")
     p.add_argument("--init", type=Path, help="a stored model's folder to start from (fine-tune)")
-    p.add_argument("--max-gap", type=float, help="drop targets of a larger relative gap")
+    p.add_argument(
+        "--max-gap",
+        type=_gap,
+        nargs="+",
+        default=[None],
+        help="drop targets of a larger relative gap: one for all --data, or one per folder "
+        "('none': any gap)",
+    )
     p.add_argument("--proven-only", action="store_true", help="drop targets of unknown gap")
     for f, v in asdict(GnnVaeConfig()).items():  # default None: --init's, else the config's
         p.add_argument(f"--{f.replace('_', '-')}", type=int, help=f"default {v}")
@@ -284,7 +324,10 @@ def main(argv: list[str] | None = None) -> None:
         torch.set_num_threads(args.threads)
     model_cfg, init = _model_setup(p, args)
     cfg = TrainConfig(**{k: getattr(args, k) for k in asdict(TrainConfig())})
-    keep = TargetFilter(args.max_gap, args.proven_only)
+    if len(args.max_gap) not in (1, len(args.data)):
+        p.error(f"--max-gap: {len(args.max_gap)} gaps for {len(args.data)} --data folders")
+    gaps = args.max_gap * len(args.data) if len(args.max_gap) == 1 else args.max_gap
+    keeps = [TargetFilter(g, args.proven_only) for g in gaps]
     result = train(
         args.data,
         args.objective,
@@ -294,7 +337,7 @@ def main(argv: list[str] | None = None) -> None:
         args.train_problems,
         args.val,
         init,
-        keep,
+        keeps,
     )
     state = result["state"]
     folder = save_model(
@@ -312,7 +355,7 @@ def main(argv: list[str] | None = None) -> None:
             "init": None if init is None else init_record(init),
             "training": {
                 **asdict(cfg),
-                "target_filter": asdict(keep),
+                "target_filter": filter_record(keeps),
                 "best_epoch": state["best_epoch"],
                 "epochs_run": state["epoch"],
             },

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import asdict
 from pathlib import Path
 
 import pytest
@@ -14,7 +15,14 @@ from service.learning.dataset import KEEP_ALL, TargetFilter, examples_from_recor
 from service.learning.generate import GeneratorConfig
 from service.learning.model import GnnVae, GnnVaeConfig
 from service.learning.store import StoredModel, load_model_dir, save_model
-from service.learning.train import TrainConfig, initial_model, main, train
+from service.learning.train import (
+    TrainConfig,
+    filter_record,
+    initial_model,
+    main,
+    per_dataset,
+    train,
+)
 
 TINY = GnnVaeConfig(hidden=16, latent=4, encoder_layers=1, decoder_layers=2, heads=1)
 OBJECTIVE = "avg_completion"
@@ -117,3 +125,42 @@ def test_cli_fine_tunes_into_a_new_version(tmp_path: Path, data: Path) -> None:
         main([*flags, "--store", str(out), "--version", "ft2", "--hidden", "8"])
     with pytest.raises(SystemExit):  # never over the model it starts from
         main([*flags, "--store", str(tmp_path / "store"), "--version", "src"])
+
+
+def test_each_dataset_gets_its_own_filter(
+    tmp_path: Path, data: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    seen: list[TargetFilter] = []
+
+    def spy(records, objective, max_targets=None, keep=KEEP_ALL):  # noqa: ANN001, ANN202
+        seen.append(keep)
+        return examples_from_records(records, objective, max_targets, keep)
+
+    monkeypatch.setattr("service.learning.train.examples_from_records", spy)
+    strict, loose = TargetFilter(max_gap=0.05), TargetFilter()
+    cfg = TrainConfig(epochs=1, batch_size=4, val_samples=2)
+    state = train(
+        [data, data], OBJECTIVE, tmp_path / "run", TINY, cfg, None, 2, keep=[strict, loose]
+    )
+    assert seen == [strict, KEEP_ALL, loose, KEEP_ALL]  # train then validation, per dataset
+    assert state["state"]["setup"]["target_filter"] == [asdict(strict), asdict(loose)]
+    with pytest.raises(ValueError, match="3 target filters for 2 datasets"):
+        per_dataset([strict] * 3, 2)
+    assert filter_record([strict, strict]) == asdict(strict)  # as before per-dataset filters
+
+
+def test_cli_takes_one_gap_per_dataset(tmp_path: Path, data: Path) -> None:
+    flags = ["--data", str(data), str(data), "--objective", OBJECTIVE, "--runs",
+             str(tmp_path / "runs"), "--store", str(tmp_path / "store"), "--epochs", "1",
+             "--batch-size", "4", "--val", "2", "--val-samples", "2", "--hidden", "8",
+             "--latent", "2", "--encoder-layers", "1", "--decoder-layers", "1",
+             "--heads", "1"]  # fmt: skip
+    main([*flags, "--version", "a", "--max-gap", "0.1", "none"])
+    meta = json.loads((tmp_path / "store" / OBJECTIVE / "a" / "model.json").read_text())
+    assert meta["training"]["target_filter"] == [
+        {"max_gap": 0.1, "proven_only": False},
+        {"max_gap": None, "proven_only": False},
+    ]
+    for bad in (["0.1", "0.2", "0.3"], ["-1"], ["x"]):
+        with pytest.raises(SystemExit):
+            main([*flags, "--version", "b", "--max-gap", *bad])
