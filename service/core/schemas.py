@@ -67,6 +67,7 @@ SolverName = Literal[
     "gnn_vae_exact",
     "random",
     "tabu",
+    "priority_tabu",
     "cmaes",
     "bbts",
 ]

@@ -46,6 +46,7 @@ from service.solvers import (  # noqa: F401  (registers the solvers)
     gnn_vae,
     hybrid,
     portfolio,
+    priority,
     random_search,
     refine,
     tabu,

@@ -1,4 +1,4 @@
-"""tabu and bbts: valid, never worse than FCFS, deterministic, within the time limit.
+"""tabu, priority_tabu and bbts: valid, never worse than FCFS, deterministic, within the time limit.
 
 On tiny problems the backtracking tree has fewer than 1,000 leaves, so bbts
 sees every valid assignment and must match the brute-force optimum.
@@ -16,12 +16,13 @@ from service.core.check import check
 from service.core.schemas import OBJECTIVES
 from service.learning.generate import stitched_problem
 from service.solvers.bbts import LEAVES, bbts
-from service.solvers.fcfs import fcfs
+from service.solvers.fcfs import blended_priorities, fcfs
+from service.solvers.priority import PriorityConfig, priority_search, priority_tabu
 from service.solvers.tabu import TabuConfig, tabu, tabu_search
 from tests.reference import feasible_assignments, reference_problem, tiny_request
 from tests.solvers.common import context, cost
 
-SOLVERS = {"tabu": tabu, "bbts": bbts}
+SOLVERS = {"tabu": tabu, "priority_tabu": priority_tabu, "bbts": bbts}
 
 
 def _ctx(req: dict[str, Any], objective: str, time_limit_s: float = 30.0, seed: int = 0):
@@ -65,6 +66,30 @@ def test_tabu_improves_a_poor_start_and_counts_its_iterations() -> None:
     assert iterations == 40
     assert found < cost(ctx, fcfs(ctx))
     assert found == pytest.approx(float(ctx.evaluator.evaluate(best).costs[ctx.objective][0]))
+
+
+@pytest.mark.parametrize("objective", OBJECTIVES)
+def test_priority_search_improves_the_cheapest_blend(objective: str) -> None:
+    ctx = _ctx(stitched_problem(4, 60, 4.0), objective)
+    ranks, scores = blended_priorities(ctx.problem)
+    blends = ctx.evaluator.evaluate(ctx.decoder.decode_ranks(ranks, scores)).costs[objective]
+    cfg = PriorityConfig(patience=40)
+    best, found, rounds = priority_search(ctx, 30.0, seed=1, cfg=cfg)
+    assert check(ctx.problem, ctx.cliques, best).ok.tolist() == [True]
+    assert found == pytest.approx(float(ctx.evaluator.evaluate(best).costs[objective][0]))
+    assert found <= blends.min() + 1e-9
+    assert rounds >= cfg.patience  # stopped on patience, not on time
+    again = priority_search(ctx, 30.0, seed=1, cfg=cfg)
+    assert again[1] == found and again[2] == rounds
+
+
+def test_priority_search_moves_many_conflicts_at_once() -> None:
+    """On a congested 120-robot problem, robot moves improve on every blend."""
+    ctx = _ctx(stitched_problem(6, 120, 4.0), "avg_completion")
+    ranks, scores = blended_priorities(ctx.problem)
+    blends = ctx.evaluator.evaluate(ctx.decoder.decode_ranks(ranks, scores)).costs
+    _, found, _ = priority_search(ctx, 30.0, seed=0, cfg=PriorityConfig(patience=60))
+    assert found < blends["avg_completion"].min()
 
 
 def test_bbts_stops_at_its_leaf_budget() -> None:
