@@ -4,10 +4,12 @@
 (0.1, 0.3, 1, 3 and 10 s), each method through the service's dispatcher as a
 request with that ``options.time_limit_s`` (:data:`METHODS`):
 
-* ``auto``: the portfolio as shipped (the best of FCFS and its blends, then tabu
-  search with 30 % of the budget above the exact threshold, then CP-SAT hinted
-  with the best); also at ``--target-budget`` (5 s, the budget of issue 11's
-  second target);
+* ``auto``: the portfolio as shipped (the best of FCFS and its blends, then
+  robot-priority search and tabu search, ``priority_tabu``, with 30 % of the budget
+  above the exact threshold, then CP-SAT hinted with the best); also at
+  ``--target-budget`` (5 s, the budget of issue 11's second target);
+* ``auto_tabu``: the same portfolio with tabu search alone as its first stage
+  (``large_solver="tabu"``, the default until session 12);
 * ``auto_gnn``: the same portfolio with ``gnn_vae_refined`` as its first stage
   (``large_solver="gnn_vae_refined"``, the default until 2026-11-24);
 * ``gnn_vae_refined`` and ``tabu`` (from FCFS) alone: each stage alone;
@@ -71,7 +73,8 @@ __all__ = ["METHODS", "QUICK", "Config", "main", "run"]
 
 # Method name -> (solver, the policy's large solver: the portfolio's first stage).
 METHODS: dict[str, tuple[str, str]] = {
-    "auto": ("auto", "tabu"),
+    "auto": ("auto", "priority_tabu"),
+    "auto_tabu": ("auto", "tabu"),
     "auto_gnn": ("auto", "gnn_vae_refined"),
     "gnn_vae_refined": ("gnn_vae_refined", "gnn_vae_refined"),
     "tabu": ("tabu", "gnn_vae_refined"),

@@ -58,8 +58,10 @@ class Settings(BaseSettings):
     # the best found): generated warehouses and floors of 515-3,900 conflicts 0.88-0.97 vs
     # 0.82-0.94 at 1 s and 0.98-1.00 vs 0.93-1.00 at 5 s; 250 robots 0.83-0.87 vs
     # 0.69-0.73 at 1 s, 0.94 / 1.00 vs 1.00 / 0.98 at 5 s; the conformance sets (83-262
-    # conflicts) identical. The GNN-VAE solvers stay available by name.
-    large_solver: str = "tabu"
+    # conflicts) identical. The GNN-VAE solvers stay available by name. Since
+    # 2026-11-24 (session 12) robot-priority search first (priority_tabu): measured
+    # against tabu in docs/benchmarks.md, "Anytime auto".
+    large_solver: str = "priority_tabu"
     # Where the learned models live (manifest.json + <objective>/<version>/); a missing
     # or corrupt model degrades its objective to the exact solver, then FCFS.
     model_store: Path = DEFAULT_MODEL_STORE

@@ -98,7 +98,7 @@ class DispatchPolicy:
     default_time_limit_s: float = 5.0
     exact_max_conflicts: int = 60
     exact_stage_max_conflicts: int = 10_000
-    large_solver: str = "tabu"
+    large_solver: str = "priority_tabu"
     exact_workers: int = 1
     exact_deterministic: bool = False
     models: Mapping[str, StoredModel] = field(default_factory=dict)  # loaded GNN-VAEs by objective

@@ -13,10 +13,18 @@ from __future__ import annotations
 
 import numpy as np
 
+from service.core.assignment import Assignments
 from service.core.problem import Problem
 from service.solvers.registry import SolveContext, SolverOutput, register
 
-__all__ = ["COMPLETION_BLENDS", "EXIT_BLENDS", "blended_priorities", "fcfs", "fcfs_priorities"]
+__all__ = [
+    "COMPLETION_BLENDS",
+    "EXIT_BLENDS",
+    "blended_priorities",
+    "cheapest_blend",
+    "fcfs",
+    "fcfs_priorities",
+]
 
 # The starts of :func:`blended_priorities`: node ranks moved from the node's enter time
 # toward its robot's planned completion (0 is FCFS; 1 lets the robot that plans to finish
@@ -62,6 +70,23 @@ def blended_priorities(problem: Problem) -> tuple[np.ndarray, np.ndarray]:
     )  # (K, V)
     ranks = (1.0 - mu) * enter[None] + mu * target
     return ranks, np.repeat(scores[None], mu.size, axis=0)
+
+
+def cheapest_blend(ctx: SolveContext) -> tuple[np.ndarray, Assignments, float]:
+    """The cheapest row of :func:`blended_priorities` under ``ctx``'s objective: its node
+    ranks (V,), its assignment (a batch of one) and its cost.
+
+    Kept in ``ctx`` once found (~50 ms at 22,000 conflicts): the portfolio's start and
+    the searches that start there (tabu, priority search) all ask, and contexts copied
+    for a stage after the first ask share it."""
+    cached = ctx.__dict__.get("_cheapest_blend")
+    if cached is None:
+        ranks, scores = blended_priorities(ctx.problem)  # (K, V), (K, M)
+        found = ctx.decoder.decode_ranks(ranks, scores)
+        costs = ctx.evaluator.evaluate(found).costs[ctx.objective]  # (K,)
+        k = int(np.argmin(costs))
+        cached = ctx.__dict__["_cheapest_blend"] = (ranks[k], found.take(k), float(costs[k]))
+    return cached
 
 
 @register("fcfs")

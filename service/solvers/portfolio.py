@@ -7,9 +7,11 @@ comes first, improving in stages:
    previous answer of a re-schedule (:func:`~service.solvers.tabu.plain_start`;
    valid by construction, milliseconds);
 2. **first stage** (problems above ``exact_max_conflicts``): the policy's large
-   solver (default ``tabu``: tabu search from that start, measured better than the
-   GNN-VAE refined by tabu search, ``gnn_vae_refined``), or tabu search from the
-   previous answer in a re-schedule, with FIRST_STAGE_SHARE of the budget;
+   solver (default ``priority_tabu``: robot-priority search from that start until it
+   stalls, then tabu search; measured better than tabu search alone, which was
+   measured better than the GNN-VAE refined by tabu search, ``gnn_vae_refined``), or
+   tabu search from the previous answer in a re-schedule, with FIRST_STAGE_SHARE of
+   the budget;
 3. **exact**: CP-SAT hinted with the best answer so far, for the rest of the
    budget; it proves optimality where it can (``solver.optimal`` is true only
    then) and never returns worse than its hint (the cheaper is kept, by the one
@@ -49,7 +51,7 @@ from service.solvers.tabu import plain_start, tabu_search
 
 __all__ = ["FIRST_STAGE_SHARE", "auto"]
 
-# Share of the budget the first stage (learned model + tabu, or tabu from the previous
+# Share of the budget the first stage (priority and tabu search, or tabu from the previous
 # answer) gets before CP-SAT takes the rest.
 FIRST_STAGE_SHARE = 0.3
 # Least time left worth another tabu search when polishing (one iteration of a

@@ -47,7 +47,7 @@ class SolveContext:
     # The portfolio (``auto``): CP-SAT alone up to this many conflicts; above, this solver
     # first (the policy's large solver), then CP-SAT hinted with its answer.
     exact_max_conflicts: int = 60
-    first_stage: str = "tabu"
+    first_stage: str = "priority_tabu"
     # ... and no CP-SAT stage at all above this many (it improves nothing there in seconds).
     exact_stage_max_conflicts: int = 10_000
     # CP-SAT limited in deterministic time too (exact.solve(deterministic=True)), so that
