@@ -39,7 +39,6 @@ from tqdm import tqdm
 
 from bench.problems import BenchProblem, small_set, stitched_set
 from bench.report import (
-    JsonCache,
     add_run_args,
     delay_ratio,
     fmt,
@@ -47,6 +46,7 @@ from bench.report import (
     jsonable,
     machine_info,
     nanmean,
+    reference_cache,
     write_csv,
     write_json,
 )
@@ -151,7 +151,7 @@ class ReferenceCache:
     """Long CP-SAT solves by problem seed, objective and limit, kept in one JSON file."""
 
     def __init__(self, directory: Path, limit_s: float) -> None:
-        self.cache = JsonCache(directory / f"compare-ref-{limit_s:g}s.json")
+        self.cache = reference_cache(directory, f"compare-ref-{limit_s:g}s")
         self.limit_s = limit_s
 
     def get(self, case: Case) -> None:

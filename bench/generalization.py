@@ -67,7 +67,6 @@ from bench.cases import (
 from bench.report import (
     MODEL_STORE,
     PERCENTILES,
-    JsonCache,
     add_run_args,
     fmt,
     jsonable,
@@ -75,6 +74,7 @@ from bench.report import (
     markdown_table,
     nanmean,
     plot_lines,
+    reference_cache,
     write_results,
 )
 from service.core.cliques import TooManyCliques
@@ -296,7 +296,7 @@ def run(cfg: Config, progress: bool = True) -> dict[str, Any]:
         raise SystemExit(f"no world could be derived: {skipped}")
     by_model = policies(cfg)
     methods = methods_of(list(by_model))
-    cache = JsonCache(cfg.cache / "generalization-ref.json")
+    cache = reference_cache(cfg.cache, "generalization-ref")
     refs = [
         cache.get(request_key(w.case, cfg), lambda w=w: reference_runs(w.case, cfg, by_model[None]))
         for w in tqdm(worlds, desc="references", unit="problem", disable=not progress)

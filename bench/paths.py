@@ -48,7 +48,6 @@ import numpy as np
 from tqdm import tqdm
 
 from bench.report import (
-    JsonCache,
     add_run_args,
     config_from_args,
     delay_ratio,
@@ -56,6 +55,7 @@ from bench.report import (
     jsonable,
     machine_info,
     nanmean,
+    reference_cache,
     write_csv,
     write_json,
 )
@@ -235,7 +235,7 @@ def references(
     cases: Sequence[WorldCase], cfg: Config, policy: DispatchPolicy, progress: bool
 ) -> None:
     """Fill every case's reference run (``exact`` with the long limit), cached by world."""
-    cache = JsonCache(cfg.cache / f"paths-ref-{cfg.ref_limit_s:g}s.json")
+    cache = reference_cache(cfg.cache, f"paths-ref-{cfg.ref_limit_s:g}s")
     for case in tqdm(cases, desc="references", unit="world", disable=not progress):
         case.ref = cache.get(
             world_key(case, cfg.objective),

@@ -20,6 +20,7 @@ import numpy as np
 __all__ = [
     "MODEL_STORE",
     "PERCENTILES",
+    "REFERENCE_VERSION",
     "JsonCache",
     "config_from_args",
     "delay_ratio",
@@ -31,6 +32,7 @@ __all__ = [
     "nanmean",
     "plot_lines",
     "plot_solve_times",
+    "reference_cache",
     "summarize_solves",
     "write_csv",
     "write_json",
@@ -115,6 +117,19 @@ class JsonCache:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self.path.write_text(json.dumps(self.data))
         return self.data[key]
+
+
+# The version of the solvers that make the cached references (compare, paths,
+# generalization). A reference is the best some solvers found, so it goes stale when
+# they improve: bumped then, so that caches from before are not reused (2: ``auto``'s
+# first stage is robot-priority search, session 12; its 10-s answers on 100-250-robot
+# warehouses cost 15-40 % less than the old references).
+REFERENCE_VERSION = 2
+
+
+def reference_cache(directory: Path, name: str) -> JsonCache:
+    """The cache of references ``name`` under ``directory``, of REFERENCE_VERSION."""
+    return JsonCache(directory / f"{name}-r{REFERENCE_VERSION}.json")
 
 
 def summarize_solves(runs: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:

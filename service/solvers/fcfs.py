@@ -82,7 +82,9 @@ def cheapest_blend(ctx: SolveContext) -> tuple[np.ndarray, Assignments, float]:
     cached = ctx.__dict__.get("_cheapest_blend")
     if cached is None:
         ranks, scores = blended_priorities(ctx.problem)  # (K, V), (K, M)
-        found = ctx.decoder.decode_ranks(ranks, scores)
+        # Every row has FCFS's scores, and types depend on scores alone: decoded once.
+        following = np.repeat(ctx.decoder.types(scores[:1]), len(ranks), axis=0)  # (K, M)
+        found = Assignments(ctx.decoder.directions(ranks), following)
         costs = ctx.evaluator.evaluate(found).costs[ctx.objective]  # (K,)
         k = int(np.argmin(costs))
         cached = ctx.__dict__["_cheapest_blend"] = (ranks[k], found.take(k), float(costs[k]))
