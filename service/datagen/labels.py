@@ -43,7 +43,7 @@ __all__ = ["HINT_ABOVE_CONFLICTS", "contexts", "portfolio_hint", "portfolio_labe
 # CP-SAT from FCFS up to this many conflicts, as the service's portfolio (``auto``) does.
 HINT_ABOVE_CONFLICTS = SolveContext.exact_max_conflicts
 # The hint's robot-priority search: a round cap instead of a clock (1,000 rounds take
-# ~2-10 s on warehouses of 100-250 robots; most stop on patience sooner).
+# ~1 s on a 100-robot warehouse, 4-8 s at 250 robots; most stop on patience sooner).
 HINT_PRIORITY = PriorityConfig(max_rounds=1000)
 
 Target = dict[str, Any]
