@@ -21,7 +21,7 @@ from service.solvers.dispatch import DispatchPolicy, dispatch, render_reserve
 from service.solvers.rescheduling import Rescheduler
 
 POLICY = DispatchPolicy()
-SOLVERS = ("auto", "tabu", "fcfs", "random", "bbts", "cmaes")
+SOLVERS = ("auto", "tabu", "priority_tabu", "fcfs", "random", "bbts", "cmaes")
 
 
 def _progress(problem: Problem, previous: Assignments, rng: np.random.Generator) -> dict[str, Any]:
@@ -87,7 +87,7 @@ def test_a_reschedule_is_valid_keeps_the_past_and_is_never_worse_than_previous(
         a, b = ids[res.conf_a[m]], ids[res.conf_b[m]]
         pair = (a, b) if warm.a_first[0, m] else (b, a)
         assert decided[pair] == ("following" if warm.following[0, m] else "exclusive")
-    if solver in ("auto", "tabu"):  # local search starts at the previous answer or better
+    if solver in ("auto", "tabu", "priority_tabu"):  # from the previous answer or better
         warm_cost = Evaluator(res).evaluate(warm).costs[objective][0]
         assert answer.cost <= warm_cost + 1e-9
 
