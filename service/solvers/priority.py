@@ -33,7 +33,7 @@ import numpy as np
 from service.core.assignment import Assignments
 from service.solvers.fcfs import cheapest_blend
 from service.solvers.registry import SolveContext, SolverOutput, register
-from service.solvers.tabu import plain_start, tabu_search
+from service.solvers.tabu import tabu_search
 
 __all__ = ["PriorityConfig", "priority_search", "priority_tabu"]
 
@@ -88,13 +88,13 @@ def priority_search(
 @register("priority_tabu")
 def priority_tabu(ctx: SolveContext) -> SolverOutput:
     """Robot-priority search until it stalls, then tabu search from the cheaper of its
-    best and the plain start (which may be a re-schedule's previous answer), in the
-    request's time limit."""
+    best and a re-schedule's previous answer, in the request's time limit (the search
+    starts at the cheapest blend and never returns worse)."""
     deadline = time.perf_counter() + ctx.time_limit_s
     found, cost, rounds = priority_search(ctx, ctx.time_limit_s, ctx.seed)
-    start = plain_start(ctx)
-    if float(ctx.evaluator.evaluate(start).costs[ctx.objective][0]) < cost:
-        found = start
+    warm = ctx.warm
+    if warm is not None and float(ctx.evaluator.evaluate(warm).costs[ctx.objective][0]) < cost:
+        found = warm
     left = deadline - time.perf_counter()
     best, _, iterations = tabu_search(ctx, found, budget_s=max(left, 0.0))
     return SolverOutput(best, detail=f"{rounds} priority rounds, {iterations} tabu iterations")
