@@ -15,12 +15,13 @@ comes first, improving in stages:
 3. **exact**: CP-SAT hinted with the best answer so far, for the rest of the
    budget; it proves optimality where it can (``solver.optimal`` is true only
    then) and never returns worse than its hint (the cheaper is kept, by the one
-   evaluator). It is skipped when building its model alone would not fit in
-   what is left (``exact.build_seconds``), and above ``exact_stage_max_conflicts``
-   (where it was measured to improve nothing within seconds); the first stage then
-   gets the whole budget, and tabu search polishes its answer with what it leaves,
-   restarted from the best with the next seed whenever it stops on its own, so that
-   an unproven answer comes at the deadline, not before.
+   evaluator). It is skipped when what is left is less than EXACT_TIME_PER_BUILD
+   times its model-building estimate (``exact.build_seconds``), and above
+   ``exact_stage_max_conflicts`` (where it was measured to improve nothing within
+   seconds); the first stage then gets the whole budget, and tabu search polishes
+   its answer with what it leaves, restarted from the best with the next seed
+   whenever it stops on its own, so that an unproven answer comes at the deadline,
+   not before.
 
 Small problems go straight to stage 3 (CP-SAT proves them in milliseconds).
 Robots that share no conflict, directly or through others, form independent
@@ -57,6 +58,13 @@ FIRST_STAGE_SHARE = 0.3
 # Least time left worth another tabu search when polishing (one iteration of a
 # 22,000-conflict problem takes ~10 ms).
 MIN_POLISH_S = 0.02
+# CP-SAT's stage runs only when its time is at least this many times its model-building
+# estimate (``exact.build_seconds``; it was 2). Measured (docs/benchmarks.md, "Anytime
+# auto", session 12) on six warehouses of 100 robots (2,000-3,900 conflicts, building
+# ~0.25-0.5 s): CP-SAT never improved the first stage's answer at 1 s, where it ran
+# with 2-3x, and the first stage given that time reached 0.97 instead of 0.92 on the
+# two-lane ones; with 3 s and more it found the best answers, and still runs there.
+EXACT_TIME_PER_BUILD = 4
 
 
 @register("auto")
@@ -101,7 +109,7 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
         return replace(best, optimal=True, detail="no conflict")
     cost = _cost(ctx, best.assignment)
     too_large = problem.n_conflicts > ctx.exact_stage_max_conflicts  # for CP-SAT to help
-    build_s = np.inf if too_large else 2 * build_seconds(problem, ctx.cliques)
+    build_s = np.inf if too_large else EXACT_TIME_PER_BUILD * build_seconds(problem, ctx.cliques)
     if problem.n_conflicts > ctx.exact_max_conflicts:
         first = "tabu" if ctx.warm is not None else ctx.first_stage
         left = deadline - time.monotonic()
