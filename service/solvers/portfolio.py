@@ -109,18 +109,20 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
         return replace(best, optimal=True, detail="no conflict")
     cost = _cost(ctx, best.assignment)
     too_large = problem.n_conflicts > ctx.exact_stage_max_conflicts  # for CP-SAT to help
-    build_s = np.inf if too_large else EXACT_TIME_PER_BUILD * build_seconds(problem, ctx.cliques)
+    # The least time worth a CP-SAT stage (inf: none at this size).
+    exact_min_s = np.inf if too_large else build_seconds(problem, ctx.cliques)
+    exact_min_s *= EXACT_TIME_PER_BUILD
     if problem.n_conflicts > ctx.exact_max_conflicts:
         first = "tabu" if ctx.warm is not None else ctx.first_stage
         left = deadline - time.monotonic()
-        exact_fits = (1 - FIRST_STAGE_SHARE) * left > build_s
+        exact_fits = (1 - FIRST_STAGE_SHARE) * left > exact_min_s
         found = get_solver(first)(_with_time(ctx, FIRST_STAGE_SHARE * left if exact_fits else left))
         found_cost = np.inf if found is None else _cost(ctx, found.assignment)
         if found is not None and found_cost <= cost:
             best, cost = found, found_cost
             stages.append(first)
     left = deadline - time.monotonic()
-    if left <= build_s:
+    if left <= exact_min_s:
         if left > 0 and (too_large or problem.n_conflicts > ctx.exact_max_conflicts):
             polished, polished_cost, restarts = _polish(ctx, best.assignment, cost, deadline)
             if polished_cost < cost:  # the first stage stopped early (its own cap, patience)

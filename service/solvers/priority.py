@@ -6,7 +6,7 @@ conflicts from a good schedule, and tabu search spends seconds walking there. He
 move shifts one robot's whole priority: node ranks are the cheapest blend's ranks
 (V,) plus an offset per robot (constant along its path, so ranks stay non-decreasing
 along every path and every decoded answer is acyclic and valid); a candidate adds
-N(0, (STEP x time span)^2) to one random robot's offset, which reverses every conflict
+N(0, (``step`` x time span)^2) to one random robot's offset, which reverses every conflict
 whose order against that robot the shift crosses, at once. Each round decodes and
 evaluates ``candidates`` of them that reorder something (a third of the shifts cross no
 other robot's rank where they meet, and are skipped) in one batched call and keeps the
