@@ -13,7 +13,11 @@ The published GNN-VAE was bottlenecked by evaluating its 100 samples per
 request; a vectorized numpy relaxation measured 89 ms for 100 assignments of a
 250-robot, 1000-conflict graph on this project's 2-core machine (target
 20 ms), so the walk is a numba-compiled topological sort (Kahn), run per
-sample without the GIL.
+sample without the GIL. It reads each sample's directions and types as they are
+(S, M) and builds its arcs itself: building (S, 2M) source and offset arrays in
+numpy first cost 20-30 % of a batch of 8 on 250-robot warehouses, and walking
+one arc per conflict instead of filtering 2M slots made the walk 1.3-2x faster
+(8 samples of a two-way warehouse of 250 robots, 21,835 conflicts: 9.6 -> 4.7 ms).
 """
 
 from __future__ import annotations
@@ -76,41 +80,50 @@ def costs_from_completion(completion: np.ndarray) -> dict[str, np.ndarray]:
 @numba.njit(cache=True, nogil=True)
 def _longest_paths(
     chain_next: np.ndarray,  # (E,) int, next event of the same robot or -1
+    chain_indeg: np.ndarray,  # (E,) int, 1 for every event with a previous one, else 0
     target: np.ndarray,  # (2M,) int, event constrained by slot j
-    source: np.ndarray,  # (S, 2M) int, event read by slot j (E = zero delay)
-    offset: np.ndarray,  # (S, 2M) float, T(source time point) - T(target time point)
-    active: np.ndarray,  # (S, 2M) bool, slot j applies in sample s
+    source: np.ndarray,  # (2, 2M) int, event read by slot j, by type (E = zero delay)
+    offset: np.ndarray,  # (2, 2M) float, T(source time point) - T(target time point)
+    live: np.ndarray,  # (2M,) bool, False for the slots of realized conflicts
+    a_first: np.ndarray,  # (S, M) uint8, side a of conflict c passes first in sample s
+    following: np.ndarray,  # (S, M) uint8, conflict c is following in sample s
     delay: np.ndarray,  # (S, E+1) float, zeros on entry; least delays on exit
 ) -> np.ndarray:  # (S,) bool, every event reached (the constraint graph is acyclic)
-    n_samples, n_slots = active.shape
+    """Kahn's walk per sample over the arcs of its conflicts' slots and types.
+
+    Conflict c constrains through slot 2c + a_first[c] with type following[c]: one
+    arc per conflict, grouped by source event (a counting sort) before the walk.
+    """
+    n_samples, n_conflicts = a_first.shape
     n_events = chain_next.size
     converged = np.ones(n_samples, dtype=np.bool_)
     indeg = np.empty(n_events, dtype=np.int64)
     out_start = np.empty(n_events + 2, dtype=np.int64)
-    out_slot = np.empty(n_slots, dtype=np.int64)
+    out_slot = np.empty(n_conflicts, dtype=np.int64)  # 2 x slot + type, by source event
     queue = np.empty(n_events, dtype=np.int64)
     for s in range(n_samples):
         d = delay[s]
-        indeg[:] = 0
+        indeg[:] = chain_indeg
         out_start[:] = 0
-        for e in range(n_events):
-            if chain_next[e] >= 0:
-                indeg[chain_next[e]] += 1
-        for j in range(n_slots):
-            if active[s, j]:
-                src = source[s, j]
+        for c in range(n_conflicts):
+            j = 2 * c + a_first[s, c]
+            if live[j]:
+                src = source[following[s, c], j]
                 if src == n_events:  # no event before the source: reads delay 0
-                    d[target[j]] = max(d[target[j]], offset[s, j])
+                    d[target[j]] = max(d[target[j]], offset[following[s, c], j])
                 else:
                     indeg[target[j]] += 1
                     out_start[src + 2] += 1
-        for e in range(n_events):  # CSR of outgoing slots per source event
+        for e in range(n_events):  # CSR of outgoing arcs per source event
             out_start[e + 2] += out_start[e + 1]
-        for j in range(n_slots):
-            if active[s, j] and source[s, j] < n_events:
-                pos = out_start[source[s, j] + 1]
-                out_slot[pos] = j
-                out_start[source[s, j] + 1] = pos + 1
+        for c in range(n_conflicts):
+            j = 2 * c + a_first[s, c]
+            t = following[s, c]
+            src = source[t, j]
+            if live[j] and src < n_events:
+                pos = out_start[src + 1]
+                out_slot[pos] = 2 * j + t
+                out_start[src + 1] = pos + 1
         head, tail = 0, 0
         for e in range(n_events):
             if indeg[e] == 0:
@@ -120,12 +133,12 @@ def _longest_paths(
             e = queue[head]
             head += 1
             for k in range(out_start[e], out_start[e + 1]):
-                j = out_slot[k]
-                t = target[j]
-                d[t] = max(d[t], d[e] + offset[s, j])
-                indeg[t] -= 1
-                if indeg[t] == 0:
-                    queue[tail] = t
+                j, t = out_slot[k] >> 1, out_slot[k] & 1
+                u = target[j]
+                d[u] = max(d[u], d[e] + offset[t, j])
+                indeg[u] -= 1
+                if indeg[u] == 0:
+                    queue[tail] = u
                     tail += 1
             n = chain_next[e]
             if n >= 0:
@@ -135,7 +148,9 @@ def _longest_paths(
                     queue[tail] = n
                     tail += 1
         if tail < n_events:  # a cycle: least times exist only if no cycle forces a wait
-            converged[s] = _relax_cyclic(chain_next, target, source[s], offset[s], active[s], d)
+            converged[s] = _relax_cyclic(
+                chain_next, target, source, offset, live, a_first[s], following[s], d
+            )
     return converged
 
 
@@ -143,9 +158,11 @@ def _longest_paths(
 def _relax_cyclic(
     chain_next: np.ndarray,  # (E,)
     target: np.ndarray,  # (2M,)
-    source: np.ndarray,  # (2M,) of one sample
-    offset: np.ndarray,  # (2M,)
-    active: np.ndarray,  # (2M,)
+    source: np.ndarray,  # (2, 2M) by type
+    offset: np.ndarray,  # (2, 2M) by type
+    live: np.ndarray,  # (2M,)
+    a_first: np.ndarray,  # (M,) of one sample
+    following: np.ndarray,  # (M,) of one sample
     d: np.ndarray,  # (E+1,) lower bounds on entry, least delays on exit if they exist
 ) -> bool:
     """Bellman-Ford sweeps for a cyclic constraint graph: True if a fixpoint is reached.
@@ -156,9 +173,11 @@ def _relax_cyclic(
     n_events = chain_next.size
     for _ in range(n_events + 1):
         changed = False
-        for j in range(target.size):
-            if active[j]:
-                value = d[source[j]] + offset[j]
+        for c in range(a_first.size):
+            j = 2 * c + a_first[c]
+            if live[j]:
+                t = following[c]
+                value = d[source[t, j]] + offset[t, j]
                 if value > d[target[j]]:
                     d[target[j]] = value
                     changed = True
@@ -192,19 +211,23 @@ class Evaluator:
         self._last_event = self._tp_event[problem.last_tp]  # (R,)
 
     def _build_slots(self, problem: Problem) -> None:
-        """Fixed arrays of the 2M conflict constraints.
+        """Fixed arrays of the 2M conflict constraints, and each event's chain in-degree.
 
         Slot 2c+s constrains side s of conflict c (the side passing second) by
-        side 1-s; it applies when side 1-s passes first.
+        side 1-s; it applies when side 1-s passes first. Its source and offset depend
+        on the conflict's type (0 exclusive: the first side's pair exit; 1 following:
+        its pair enter): (2, 2M) arrays indexed by type, so that the walk reads them
+        per sample without (S, 2M) copies.
         """
         tp_event, t = self._tp_event, problem.tp_time
         pe, px = problem.tp_pair_enter, problem.tp_pair_exit  # (M, 2)
         first_pe, first_px = pe[:, ::-1], px[:, ::-1]  # time points of the side passing first
         self._target = tp_event[pe].ravel()  # (2M,)
-        self._src_excl = tp_event[first_px].ravel()
-        self._src_foll = tp_event[first_pe].ravel()
-        self._off_excl = (t[first_px] - t[pe]).ravel()
-        self._off_foll = (t[first_pe] - t[pe]).ravel()
+        self._source = np.stack([tp_event[first_px].ravel(), tp_event[first_pe].ravel()])
+        self._offset = np.stack([(t[first_px] - t[pe]).ravel(), (t[first_pe] - t[pe]).ravel()])
+        chain_indeg = np.zeros(self.n_events, dtype=np.int64)  # (E,)
+        chain_indeg[self._chain_next[self._chain_next >= 0]] = 1
+        self._chain_indeg = chain_indeg
 
     @property
     def graph(self) -> ConstraintGraph:
@@ -212,8 +235,8 @@ class Evaluator:
         return ConstraintGraph(
             self._chain_next,
             self._target,
-            np.stack([self._src_excl, self._src_foll]),
-            np.stack([self._off_excl, self._off_foll]),
+            self._source,
+            self._offset,
             self._live,
             self._last_event,
             self._delay_weight,
@@ -222,16 +245,20 @@ class Evaluator:
     def evaluate(self, assignments: Assignments) -> Evaluation:
         """Least updated times and costs of every assignment in the batch."""
         problem = self.problem
-        n_samples = assignments.n_samples
-        # Slot 2c is active when b passes first, slot 2c+1 when a does.
-        active = np.stack([~assignments.a_first, assignments.a_first], axis=2)
-        active = active.reshape(n_samples, 2 * problem.n_conflicts)  # (S, 2M), S may be 0
-        active &= self._live[None, :]
-        following = np.repeat(assignments.following, 2, axis=1)  # (S, 2M)
-        source = np.where(following, self._src_foll, self._src_excl)  # (S, 2M)
-        offset = np.where(following, self._off_foll, self._off_excl)  # (S, 2M)
-        delay = np.zeros((n_samples, self.n_events + 1))  # (S, E+1)
-        converged = _longest_paths(self._chain_next, self._target, source, offset, active, delay)
+        a_first = np.ascontiguousarray(assignments.a_first).view(np.uint8)  # (S, M)
+        following = np.ascontiguousarray(assignments.following).view(np.uint8)  # (S, M)
+        delay = np.zeros((assignments.n_samples, self.n_events + 1))  # (S, E+1), S may be 0
+        converged = _longest_paths(
+            self._chain_next,
+            self._chain_indeg,
+            self._target,
+            self._source,
+            self._offset,
+            self._live,
+            a_first,
+            following,
+            delay,
+        )
         completion = problem.tp_time[problem.last_tp] + delay[:, self._last_event]  # (S, R)
         costs = costs_from_completion(completion)
         costs["avg_delay"] = delay @ self._delay_weight
@@ -250,8 +277,8 @@ class Evaluator:
         delay = evaluation.event_delay[sample]  # (E+1,)
         a_first, following = assignments.a_first[sample], assignments.following[sample]
         slot = 2 * np.arange(a_first.size) + a_first  # (M,) the active slot of each conflict
-        source = np.where(following, self._src_foll[slot], self._src_excl[slot])  # (M,)
-        offset = np.where(following, self._off_foll[slot], self._off_excl[slot])  # (M,)
+        source = self._source[following.astype(np.intp), slot]  # (M,)
+        offset = self._offset[following.astype(np.intp), slot]  # (M,)
         target = delay[self._target[slot]]  # (M,)
         tol = 1e-9 * max(1.0, float(np.abs(self.problem.tp_time).max(initial=0.0)))
         tight = np.abs(target - delay[source] - offset) <= tol
