@@ -16,12 +16,14 @@ from service.learning.generate import GeneratorConfig
 from service.learning.model import GnnVae, GnnVaeConfig
 from service.learning.store import StoredModel, load_model_dir, save_model
 from service.learning.train import (
+    PARTS,
     TrainConfig,
     filter_record,
     initial_model,
     main,
     per_dataset,
     train,
+    trainable,
 )
 
 TINY = GnnVaeConfig(hidden=16, latent=4, encoder_layers=1, decoder_layers=2, heads=1)
@@ -53,9 +55,11 @@ def _forward(model: GnnVae, data: Path) -> tuple[torch.Tensor, ...]:
     return h, bids, logits
 
 
-def _train(data: Path, run_dir: Path, init: StoredModel | None, **train_cfg) -> dict:
+def _train(
+    data: Path, run_dir: Path, init: StoredModel | None, frozen: tuple[str, ...] = (), **train_cfg
+) -> dict:
     cfg = TrainConfig(**{"epochs": 1, "batch_size": 4, "val_samples": 2, **train_cfg})
-    return train([data], OBJECTIVE, run_dir, TINY, cfg, None, 2, init=init)
+    return train([data], OBJECTIVE, run_dir, TINY, cfg, None, 2, init=init, frozen=frozen)
 
 
 def test_init_starts_from_the_source_weights_exactly(tmp_path: Path, data: Path) -> None:
@@ -164,3 +168,44 @@ def test_cli_takes_one_gap_per_dataset(tmp_path: Path, data: Path) -> None:
     for bad in (["0.1", "0.2", "0.3"], ["-1"], ["x"]):
         with pytest.raises(SystemExit):
             main([*flags, "--version", "b", "--max-gap", *bad])
+
+
+def test_frozen_parts_keep_the_source_weights_and_the_rest_learn(
+    tmp_path: Path, data: Path
+) -> None:
+    source = _source(tmp_path / "store", "src", seed=1)
+    before = {k: v.clone() for k, v in source.model.state_dict().items()}
+    frozen = ("encoder", "trunk")
+    result = _train(data, tmp_path / "run", source, frozen, lr=0.01)
+    after = result["model"].state_dict()
+    for name, weight in after.items():
+        if name.split(".")[0] in frozen:
+            assert torch.equal(weight, before[name]), name
+    assert any(not torch.equal(w, before[k]) for k, w in after.items() if k.startswith("bid_head"))
+    assert result["state"]["setup"]["frozen"] == ["encoder", "trunk"]
+    with pytest.raises(SystemExit, match="another setup"):  # a resume must freeze the same
+        _train(data, tmp_path / "run", source, ("trunk",), epochs=2)
+
+
+def test_trainable_refuses_unknown_parts_and_lists_the_rest() -> None:
+    model = GnnVae(TINY)
+    assert len(trainable(model, ())) == len(list(model.parameters()))
+    kept = trainable(model, PARTS[:-1])  # every part but the edge head frozen
+    assert {id(p) for p in kept} == {id(p) for p in model.edge_head.parameters()}
+    with pytest.raises(ValueError, match="unknown model parts"):
+        trainable(GnnVae(TINY), ("decoder",))
+
+
+def test_cli_freezes_only_with_an_init(tmp_path: Path, data: Path) -> None:
+    _source(tmp_path / "store", "src", seed=1)
+    flags = ["--data", str(data), "--objective", OBJECTIVE, "--runs", str(tmp_path / "runs"),
+             "--epochs", "1", "--batch-size", "4", "--val", "2", "--val-samples", "2",
+             "--store", str(tmp_path / "out")]  # fmt: skip
+    init = ["--init", str(tmp_path / "store" / OBJECTIVE / "src")]
+    main([*flags, *init, "--version", "ft", "--freeze", "trunk", "encoder"])
+    meta = json.loads((tmp_path / "out" / OBJECTIVE / "ft" / "model.json").read_text())
+    assert meta["training"]["frozen"] == ["encoder", "trunk"]
+    with pytest.raises(SystemExit):  # nothing to keep without --init
+        main([*flags, "--version", "b", "--freeze", "trunk"])
+    with pytest.raises(SystemExit):
+        main([*flags, *init, "--version", "c", "--freeze", "decoder"])
