@@ -11,15 +11,23 @@ from typing import Any
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from service.core.check import check
 from service.core.schemas import OBJECTIVES
 from service.learning.generate import stitched_problem
 from service.solvers.bbts import LEAVES, bbts
 from service.solvers.fcfs import blended_priorities, fcfs
-from service.solvers.priority import PriorityConfig, priority_search, priority_tabu
+from service.solvers.priority import (
+    PriorityConfig,
+    RankFlips,
+    priority_search,
+    priority_tabu,
+    shifted_directions,
+)
 from service.solvers.tabu import TabuConfig, tabu, tabu_search
-from tests.reference import feasible_assignments, reference_problem, tiny_request
+from tests.reference import feasible_assignments, fix_directions, reference_problem, tiny_request
 from tests.solvers.common import context, cost
 
 SOLVERS = {"tabu": tabu, "priority_tabu": priority_tabu, "bbts": bbts}
@@ -90,6 +98,39 @@ def test_priority_search_moves_many_conflicts_at_once() -> None:
     blends = ctx.evaluator.evaluate(ctx.decoder.decode_ranks(ranks, scores)).costs
     _, found, _ = priority_search(ctx, 30.0, seed=0, cfg=PriorityConfig(patience=60))
     assert found < blends["avg_completion"].min()
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    seed=st.integers(0, 10_000),
+    robots=st.integers(3, 40),
+    share=st.sampled_from([0.0, 0.2, 0.6]),
+    scale=st.sampled_from([0.01, 0.1, 1.0]),
+)
+def test_shifted_directions_equal_decoding_the_shifted_ranks_whole(
+    seed: int, robots: int, share: float, scale: float
+) -> None:
+    """Only the conflicts of nodes whose repaired rank moved are looked at, yet every
+    draw's directions are the decoder's for its whole ranks, fixed directions included."""
+    ctx = _ctx(fix_directions(stitched_problem(seed, robots, 3.0), seed, share), "avg_completion")
+    p, rng = ctx.problem, np.random.default_rng(seed)
+    blends = blended_priorities(p)[0]  # (K, V) non-decreasing along every path
+    base = blends[rng.integers(len(blends))]  # (V,)
+    span = float(p.node_exit.max() - p.node_enter.min())
+    offsets = rng.normal(0.0, scale * span, p.n_robots)  # (R,) a current best's offsets
+    current = (base + offsets[p.node_robot])[None]  # (1, V)
+    ranks = ctx.decoder.repair(current)  # (1, V)
+    best = ctx.decoder.decode_ranks(current, np.zeros((1, p.n_conflicts)))
+    robot = rng.integers(p.n_robots, size=12)  # (D,)
+    shifted = offsets[robot] + rng.normal(0.0, scale * span, robot.size)  # (D,)
+    moved, a_first = shifted_directions(
+        ctx, RankFlips(p), robot, shifted, base, offsets, ranks[0], best, robot.size
+    )
+    trial = np.repeat(offsets[None], robot.size, axis=0)  # (D, R)
+    trial[np.arange(robot.size), robot] = shifted
+    whole = ctx.decoder.directions(base[None] + trial[:, p.node_robot])  # (D, M)
+    assert np.array_equal(moved, np.flatnonzero((whole != best.a_first).any(axis=1)))
+    assert np.array_equal(a_first, whole[moved])
 
 
 def test_bbts_stops_at_its_leaf_budget() -> None:
