@@ -245,8 +245,8 @@ class Evaluator:
     def evaluate(self, assignments: Assignments) -> Evaluation:
         """Least updated times and costs of every assignment in the batch."""
         problem = self.problem
-        a_first = np.ascontiguousarray(assignments.a_first).view(np.uint8)  # (S, M)
-        following = np.ascontiguousarray(assignments.following).view(np.uint8)  # (S, M)
+        a_first = np.ascontiguousarray(assignments.a_first, dtype=bool).view(np.uint8)  # (S, M)
+        following = np.ascontiguousarray(assignments.following, dtype=bool).view(np.uint8)  # (S, M)
         delay = np.zeros((assignments.n_samples, self.n_events + 1))  # (S, E+1), S may be 0
         converged = _longest_paths(
             self._chain_next,
