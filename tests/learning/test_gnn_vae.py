@@ -195,3 +195,15 @@ def test_training_resumes_and_refuses_a_checkpoint_of_other_flags(tmp_path: Path
     with pytest.raises(SystemExit, match="another setup"):
         run(1, replace(TINY, hidden=8))
     assert run(2)["state"]["epoch"] == 2  # more epochs: resumed, not restarted
+
+
+@pytest.mark.parametrize("objective", OBJECTIVES)
+def test_every_default_model_has_a_card(objective: str) -> None:
+    """Issue 13: each shipped default says what it was trained on, what it measured and
+    where it falls short, in its own metadata (``model.json``, key ``card``)."""
+    manifest = json.loads((SHIPPED / "manifest.json").read_text())
+    version = manifest["default"][objective]
+    card = json.loads((SHIPPED / objective / version / "model.json").read_text()).get("card")
+    assert card is not None, f"{objective} {version} has no card"
+    assert {"status", "data", "figures", "limits"} <= set(card)
+    assert all(card[k] for k in ("status", "data", "figures", "limits"))
