@@ -356,14 +356,12 @@ def main(argv: list[str] | None = None) -> None:
         return
     if args.quick:
         args.small, args.sizes, args.per_size, args.exact_limit = 20, [25, 50], 1, 5.0
-    objectives = tuple(
-        dict.fromkeys([*args.objectives, *([args.large_objective] * bool(args.sizes))])
-    )
-    models, errors = load_all(args.store, objectives)
+    small = tuple(args.objectives)
+    extra = (args.large_objective,) if args.sizes and args.large_objective not in small else ()
+    models, errors = load_all(args.store, small + extra)
     if errors:
         raise SystemExit(f"models failed to load: {errors}")
     args.out.mkdir(parents=True, exist_ok=True)
-    small = tuple(args.objectives)
     rows = small_rows(models, held_out_cases(args.small, small), "held-out")
     rows += small_rows(models, conformance_cases(small), "conform")
     large = large_rows(

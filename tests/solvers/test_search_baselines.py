@@ -123,7 +123,7 @@ def test_shifted_directions_equal_decoding_the_shifted_ranks_whole(
     best = ctx.decoder.decode_ranks(current, np.zeros((1, p.n_conflicts)))
     robot = rng.integers(p.n_robots, size=12)  # (D,)
     shifted = offsets[robot] + rng.normal(0.0, scale * span, robot.size)  # (D,)
-    moved, a_first = shifted_directions(
+    moved, a_first, moved_ranks = shifted_directions(
         ctx, RankFlips(p), robot, shifted, base, offsets, ranks[0], best, robot.size
     )
     trial = np.repeat(offsets[None], robot.size, axis=0)  # (D, R)
@@ -131,6 +131,8 @@ def test_shifted_directions_equal_decoding_the_shifted_ranks_whole(
     whole = ctx.decoder.directions(base[None] + trial[:, p.node_robot])  # (D, M)
     assert np.array_equal(moved, np.flatnonzero((whole != best.a_first).any(axis=1)))
     assert np.array_equal(a_first, whole[moved])
+    repaired = ctx.decoder.repair(base[None] + trial[moved][:, p.node_robot])  # (C, V)
+    assert np.array_equal(moved_ranks, repaired)
 
 
 def test_bbts_stops_at_its_leaf_budget() -> None:
