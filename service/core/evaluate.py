@@ -108,9 +108,10 @@ def _longest_paths(
         for c in range(n_conflicts):
             j = 2 * c + a_first[s, c]
             if live[j]:
-                src = source[following[s, c], j]
+                t = following[s, c]
+                src = source[t, j]
                 if src == n_events:  # no event before the source: reads delay 0
-                    d[target[j]] = max(d[target[j]], offset[following[s, c], j])
+                    d[target[j]] = max(d[target[j]], offset[t, j])
                 else:
                     indeg[target[j]] += 1
                     out_start[src + 2] += 1
