@@ -15,20 +15,21 @@ stops early after ``--patience`` epochs without improvement. A checkpoint
 (state dicts only, loaded with ``weights_only=True``) is written every epoch
 and picked up again by the same command (a checkpoint left by other flags is refused, not mixed in).
 
-Fine-tuning: ``--init model_store/avg_completion/v4`` starts from that model's
-config and weights (loaded as the service loads models: safetensors, checksum
-checked) instead of random ones; the model flags may then be left out (given,
-they must match); ``--freeze trunk encoder`` keeps those parts' weights as they were
-and trains the rest (:data:`PARTS`). ``--max-gap G`` trains only on targets whose recorded relative
-gap to CP-SAT's bound is at most G (proven optima have 0), ``--proven-only`` also
-drops targets of unknown gap (:class:`service.learning.dataset.TargetFilter`);
+Fine-tuning: ``--init model_store/avg_completion/v4`` starts from that model's config
+and weights (loaded as the service loads models: safetensors, checksum checked) instead
+of random ones; the model flags may then be left out (given, they must match);
+``--freeze trunk encoder`` keeps those parts' weights as they were and trains the rest
+(:data:`PARTS`, or a module inside one by its dotted name, e.g. ``trunk.convs.0``: the
+trunk's first GATv2 layer). ``--max-gap G`` trains only on targets whose recorded
+relative gap to CP-SAT's bound is at most G (proven optima have 0), ``--proven-only``
+also drops targets of unknown gap (:class:`service.learning.dataset.TargetFilter`);
 validation problems keep every target. ``--max-gap`` takes one gap for every dataset or
 one per ``--data`` folder, ``none`` for any gap: a CP-SAT gap means little where its
 bound is weak (50-100 robots), so labels of a longer solve may be kept whatever their
-gap while 1-s labels are filtered, e.g. ``--data data/scenario-v1
-data/scenario-large-v1 --max-gap 0.05 none``. The result is saved as ``--version`` and,
-as every trained model, becomes the store's default: train candidates into their
-own ``--store`` and compare them with ``python -m bench.generalization --candidate``.
+gap while 1-s labels are filtered, e.g. ``--data data/scenario-v1 data/scenario-large-v1
+--max-gap 0.05 none``. The result is saved as ``--version`` and, as every trained model,
+becomes the store's default: train candidates into their own ``--store`` and compare
+them with ``python -m bench.generalization --candidate``.
 """
 
 from __future__ import annotations
@@ -64,8 +65,10 @@ __all__ = ["TrainConfig", "loss_terms", "train", "validate"]
 
 GAMMA = 0.1  # hinge margin on ranks (published)
 WEIGHTS = {"hinge": 1.0, "bce": 1.0, "kl": 0.01}  # published loss weights
-# The GnnVae's parts, by attribute, that --freeze can hold fixed while fine-tuning.
+# The GnnVae's parts, by attribute, that --freeze can hold fixed while fine-tuning (or a
+# module inside one, by its dotted name: ``trunk.convs.3``, ``trunk.norms.3``, ``trunk.inp``).
 PARTS = ("encoder", "to_mu", "to_logstd", "trunk", "bid_head", "edge_head")
+PART_HINT = f"parts are {', '.join(PARTS)}, or a module inside one by dotted name (trunk.convs.0)"
 
 
 @dataclass(frozen=True)
@@ -248,19 +251,34 @@ def train(
 def trainable(model: GnnVae, frozen: Sequence[str]) -> list[torch.nn.Parameter]:
     """The parameters outside the ``frozen`` parts, which are set not to need gradients.
 
-    Fine-tuning every weight on scenario data cost the small random problems ~0.003 of
-    cost ratio with one sample (v8, v11, v12); freezing the graph layers keeps what they
-    learned there and adapts the heads only.
+    A part is one of :data:`PARTS` or a module inside one by its dotted name
+    (``trunk.convs.0``), so that a fine-tune can keep the first graph layers and adapt
+    the last. Fine-tuning every weight on scenario data cost the small random problems
+    ~0.003 of cost ratio with one sample (v8, v11, v12); freezing the graph layers keeps
+    what they learned there and adapts the heads only.
 
     Raises:
-        ValueError: a name that is not one of :data:`PARTS`.
+        ValueError: a name that is not a part or a module inside one.
     """
-    unknown = set(frozen) - set(PARTS)
+    unknown = unknown_parts(model, frozen)
     if unknown:
-        raise ValueError(f"unknown model parts {sorted(unknown)}; parts are {PARTS}")
+        raise ValueError(f"unknown model parts {unknown}; {PART_HINT}")
     for name in frozen:
-        getattr(model, name).requires_grad_(False)
+        model.get_submodule(name).requires_grad_(False)
     return [p for p in model.parameters() if p.requires_grad]
+
+
+def unknown_parts(model: GnnVae, names: Sequence[str]) -> list[str]:
+    """The ``names`` (sorted) that are neither one of :data:`PARTS` nor a module inside one."""
+
+    def known(name: str) -> bool:
+        try:
+            model.get_submodule(name)
+        except AttributeError:
+            return False
+        return name.split(".")[0] in PARTS
+
+    return sorted(name for name in names if not known(name))
 
 
 def per_dataset(keep: TargetFilter | Sequence[TargetFilter], n: int) -> list[TargetFilter]:
@@ -317,9 +335,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--freeze",
         nargs="+",
-        choices=PARTS,
         default=[],
-        help="model parts whose weights stay as --init's (fine-tune the rest)",
+        metavar="PART",
+        help=f"model parts whose weights stay as --init's (fine-tune the rest); {PART_HINT}",
     )
     for f, v in asdict(GnnVaeConfig()).items():  # default None: --init's, else the config's
         p.add_argument(f"--{f.replace('_', '-')}", type=int, help=f"default {v}")
@@ -357,6 +375,9 @@ def main(argv: list[str] | None = None) -> None:
     model_cfg, init = _model_setup(p, args)
     if args.freeze and init is None:
         p.error("--freeze keeps weights of --init: give the model to start from")
+    unknown = unknown_parts(GnnVae(model_cfg), args.freeze)
+    if unknown:
+        p.error(f"--freeze: unknown model parts {unknown}; {PART_HINT}")
     cfg = TrainConfig(**{k: getattr(args, k) for k in asdict(TrainConfig())})
     if len(args.max_gap) not in (1, len(args.data)):
         p.error(f"--max-gap: {len(args.max_gap)} gaps for {len(args.data)} --data folders")

@@ -192,8 +192,20 @@ def test_trainable_refuses_unknown_parts_and_lists_the_rest() -> None:
     assert len(trainable(model, ())) == len(list(model.parameters()))
     kept = trainable(model, PARTS[:-1])  # every part but the edge head frozen
     assert {id(p) for p in kept} == {id(p) for p in model.edge_head.parameters()}
-    with pytest.raises(ValueError, match="unknown model parts"):
-        trainable(GnnVae(TINY), ("decoder",))
+    for bad in ("decoder", "trunk.convs.99", "trunk.inp.weight", "convs.0", ""):
+        with pytest.raises(ValueError, match="unknown model parts"):
+            trainable(GnnVae(TINY), (bad,))
+
+
+def test_a_module_inside_a_part_freezes_alone() -> None:
+    model = GnnVae(TINY)
+    last = TINY.decoder_layers - 1
+    names = ["trunk.inp", *(f"trunk.{k}.{i}" for k in ("convs", "norms") for i in range(last))]
+    kept = {id(p) for p in trainable(model, names)}
+    frozen = {id(p) for name in names for p in model.get_submodule(name).parameters()}
+    everything = {id(p) for p in model.parameters()}
+    assert kept == everything - frozen
+    assert {id(p) for p in model.trunk.convs[last].parameters()} <= kept
 
 
 def test_cli_freezes_only_with_an_init(tmp_path: Path, data: Path) -> None:
@@ -207,5 +219,6 @@ def test_cli_freezes_only_with_an_init(tmp_path: Path, data: Path) -> None:
     assert meta["training"]["frozen"] == ["encoder", "trunk"]
     with pytest.raises(SystemExit):  # nothing to keep without --init
         main([*flags, "--version", "b", "--freeze", "trunk"])
-    with pytest.raises(SystemExit):
-        main([*flags, *init, "--version", "c", "--freeze", "decoder"])
+    for bad in ("decoder", "trunk.convs.99"):
+        with pytest.raises(SystemExit):
+            main([*flags, *init, "--version", "c", "--freeze", bad])
