@@ -15,7 +15,9 @@
 ``--store`` and ``--objectives`` measure candidates where they were trained
 (``--store runs/candidates --objectives avg_completion --sizes``: small problems
 only, one objective); the problems depend on ``--small`` alone, so two stores'
-runs are compared problem by problem.
+runs are compared problem by problem: ``--baseline OUT`` pairs the small problems
+against another run's ``--out`` (mean difference and its standard error per set,
+objective and sample count).
 
 Figures: optimality ratio = opt / cost (the published one); delay ratio =
 (opt - free) / (cost - free), free = the cost with zero delay (1 when
@@ -238,6 +240,54 @@ def summarize_small(rows: list[dict[str, Any]]) -> list[str]:
     return out
 
 
+def paired_lines(rows: list[dict[str, Any]], base: list[dict[str, Any]]) -> list[str]:
+    """Table lines: per set, objective and sample count, the mean per-problem difference
+    against a baseline run on the same problems, with its standard error (positive: this
+    run is better; ratio for the completion objectives, minus the gap for avg_delay).
+
+    Two models' means on 300-1000 random problems differ by about one standard error of
+    noise with one sample (~0.0009 at 1000): pairing the problems is what tells a loss
+    from noise.
+
+    Raises:
+        ValueError: the two runs did not solve the same problems (optima differ).
+    """
+    out = [
+        f"{'set':10} {'objective':16} {'n':>5}  "
+        + "  ".join(f"{f'S={s} (base, diff +- se)':>34}" for s in SAMPLE_COUNTS)
+    ]
+    keys = sorted({(r["set"], r["objective"]) for r in rows})
+    for set_name, objective in keys:
+        sel = [r for r in rows if r["set"] == set_name and r["objective"] == objective]
+        ref = [r for r in base if r["set"] == set_name and r["objective"] == objective]
+        if [r["opt"] for r in sel] != [r["opt"] for r in ref]:
+            raise ValueError(f"the baseline solved other {set_name} {objective} problems")
+        cells = []
+        for s in SAMPLE_COUNTS:
+            score = _gap_score if objective == "avg_delay" else _ratio_score
+            mine = np.array([score(r, f"gnn{s}") for r in sel])  # (n,)
+            theirs = np.array([score(r, f"gnn{s}") for r in ref])  # (n,)
+            diff = mine - theirs
+            se = diff.std(ddof=1) / np.sqrt(diff.size) if diff.size > 1 else np.nan
+            cells.append(f"{theirs.mean():.4f}, {diff.mean():+.5f} +- {se:.5f}")
+        out.append(
+            f"{set_name:10} {objective:16} {len(sel):5d}  " + "  ".join(f"{c:>34}" for c in cells)
+        )
+    out.append(
+        "paired against the baseline: its mean, then this run's mean difference +- its "
+        "standard error (positive: better; avg_delay: minus the gap)"
+    )
+    return out
+
+
+def _ratio_score(row: dict[str, Any], key: str) -> float:
+    return _ratio(row["opt"], row[key])
+
+
+def _gap_score(row: dict[str, Any], key: str) -> float:
+    return row["opt"] - row[key]
+
+
 def _reach_text(sel: list[dict[str, Any]], key: str) -> str:
     """Mean CP-SAT time to reach a method's cost ('+': some never did, counted at the limit)."""
     reach = [r[key] for r in sel]
@@ -344,6 +394,11 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--samples", type=int, default=100)
     p.add_argument("--out", type=Path, default=Path("bench/out/gnn"))
     p.add_argument(
+        "--baseline",
+        type=Path,
+        help="another run's --out: small problems paired against its (same problems)",
+    )
+    p.add_argument(
         "--summarize",
         action="store_true",
         help="only re-render tables and plot from the raw results in --out",
@@ -352,7 +407,7 @@ def main(argv: list[str] | None = None) -> None:
     if args.summarize:
         rows = json.loads((args.out / "small.json").read_text())
         large = json.loads((args.out / "large.json").read_text())
-        report(rows, large, args.out)
+        report(rows, large, args.out, _baseline(args.baseline))
         return
     if args.quick:
         args.small, args.sizes, args.per_size, args.exact_limit = 20, [25, 50], 1, 5.0
@@ -375,12 +430,26 @@ def main(argv: list[str] | None = None) -> None:
     )
     (args.out / "small.json").write_text(json.dumps(rows, indent=1))
     (args.out / "large.json").write_text(json.dumps(large, indent=1))
-    report(rows, large, args.out)
+    report(rows, large, args.out, _baseline(args.baseline))
 
 
-def report(rows: list[dict[str, Any]], large: list[dict[str, Any]], out: Path) -> None:
-    """Print the tables and write them and the plot under ``out``."""
-    lines = summarize_small(rows) + [""] + summarize_large(large)
+def _baseline(out: Path | None) -> list[dict[str, Any]] | None:
+    """The small-problem rows of a baseline run (None: no baseline)."""
+    return None if out is None else json.loads((out / "small.json").read_text())
+
+
+def report(
+    rows: list[dict[str, Any]],
+    large: list[dict[str, Any]],
+    out: Path,
+    base: list[dict[str, Any]] | None = None,
+) -> None:
+    """Print the tables (small problems paired against ``base`` too, if given) and write
+    them and the plot under ``out``."""
+    lines = summarize_small(rows)
+    if base is not None:
+        lines += [""] + paired_lines(rows, base)
+    lines += [""] + summarize_large(large)
     print("\n".join(lines))
     (out / "tables.txt").write_text("\n".join(lines) + "\n")
     if large:
