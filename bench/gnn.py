@@ -262,9 +262,9 @@ def paired_lines(rows: list[dict[str, Any]], base: list[dict[str, Any]]) -> list
         ref = [r for r in base if r["set"] == set_name and r["objective"] == objective]
         if [r["opt"] for r in sel] != [r["opt"] for r in ref]:
             raise ValueError(f"the baseline solved other {set_name} {objective} problems")
+        score = _gap_score if objective == "avg_delay" else _ratio_score
         cells = []
         for s in SAMPLE_COUNTS:
-            score = _gap_score if objective == "avg_delay" else _ratio_score
             mine = np.array([score(r, f"gnn{s}") for r in sel])  # (n,)
             theirs = np.array([score(r, f"gnn{s}") for r in ref])  # (n,)
             diff = mine - theirs
