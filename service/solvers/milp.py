@@ -154,7 +154,8 @@ def _model(
     problem: Problem, cliques: Cliques, evaluator: Evaluator, objective: Objective
 ) -> tuple[np.ndarray, float, np.ndarray, Bounds, LinearConstraint]:
     """Objective vector and its constant term, integrality, bounds and rows over the
-    variables [a_first (M), following (M), delay (E), position (V), max completion (1)]."""
+    variables [a_first (M), following (M), delay (E), position (V)] and, for
+    max_completion only, the maximum completion (1)."""
     graph = evaluator.graph
     m, n_events, n_nodes = problem.n_conflicts, graph.chain_next.size, problem.n_nodes
     t = problem.tp_time
@@ -162,7 +163,7 @@ def _model(
     horizon = float(t[first_tp].max() + (t[last_tp] - t[first_tp]).sum())
     x_col, f_col = np.arange(m), m + np.arange(m)
     d_base, p_base, top = 2 * m, 2 * m + n_events, 2 * m + n_events + n_nodes
-    n_vars = top + 1
+    n_vars = top + (objective == "max_completion")
 
     def delay_col(events: np.ndarray) -> np.ndarray:  # the zero slot E is no variable: -1
         return np.where(events < n_events, d_base + events, -1)
@@ -181,7 +182,7 @@ def _model(
 
     lower = np.zeros(n_vars)
     upper = np.concatenate([np.ones(2 * m), np.full(n_events, horizon), np.full(n_nodes, n_nodes)])
-    upper = np.append(upper, np.inf)
+    upper = np.append(upper, [np.inf] * (n_vars - top))  # the maximum completion, if any
     forced = problem.forced_arcs[0]
     lower[x_col[forced]] = upper[x_col[forced]] = (problem.forced[forced] > 0).astype(float)
     fixed = np.flatnonzero(problem.fixed_type >= 0)
