@@ -12,6 +12,9 @@ request with that ``options.time_limit_s`` (:data:`METHODS`):
   (``large_solver="tabu"``, the default until session 12);
 * ``auto_gnn``: the same portfolio with ``gnn_vae_refined`` as its first stage
   (``large_solver="gnn_vae_refined"``, the default until 2026-11-24);
+* ``auto_2cores``: ``auto`` given both cores of the 2-core machine
+  (``exact_workers=2``: two CP-SAT workers, the search's batches evaluated in two
+  threads), as a service running one solve at a time can be set up;
 * ``gnn_vae_refined`` and ``tabu`` (from FCFS) alone: each stage alone;
 * ``exact``: plain CP-SAT hinted with FCFS.
 
@@ -71,14 +74,16 @@ from service.solvers.dispatch import DispatchPolicy
 
 __all__ = ["METHODS", "QUICK", "Config", "main", "run"]
 
-# Method name -> (solver, the policy's large solver: the portfolio's first stage).
-METHODS: dict[str, tuple[str, str]] = {
-    "auto": ("auto", "priority_tabu"),
-    "auto_tabu": ("auto", "tabu"),
-    "auto_gnn": ("auto", "gnn_vae_refined"),
-    "gnn_vae_refined": ("gnn_vae_refined", "gnn_vae_refined"),
-    "tabu": ("tabu", "gnn_vae_refined"),
-    "exact": ("exact", "gnn_vae_refined"),
+# Method name -> (solver, the policy's large solver: the portfolio's first stage, cores of
+# the solve: the policy's exact_workers).
+METHODS: dict[str, tuple[str, str, int]] = {
+    "auto": ("auto", "priority_tabu", 1),
+    "auto_2cores": ("auto", "priority_tabu", 2),
+    "auto_tabu": ("auto", "tabu", 1),
+    "auto_gnn": ("auto", "gnn_vae_refined", 1),
+    "gnn_vae_refined": ("gnn_vae_refined", "gnn_vae_refined", 1),
+    "tabu": ("tabu", "gnn_vae_refined", 1),
+    "exact": ("exact", "gnn_vae_refined", 1),
 }
 TARGET_METHOD = "auto"  # the one method also run at the target budget
 EARLY = 0.5  # a run ending before this share of its budget stopped on its own
@@ -132,8 +137,8 @@ def run_method(
 ) -> dict[str, Any]:
     """One method on one problem through the dispatcher, with ``budget_s`` as time limit
     (``policy``: the service's, with the method's large solver)."""
-    solver, large = METHODS[method]
-    policy = replace(policy, large_solver=large)
+    solver, large, cores = METHODS[method]
+    policy = replace(policy, large_solver=large, exact_workers=cores)
     options = {"solver": solver, "time_limit_s": budget_s, "seed": cfg.base_seed}
     answer, runtime = solve_case(case, policy, options)
     return {

@@ -22,6 +22,9 @@ one arc per conflict instead of filtering 2M slots made the walk 1.3-2x faster
 
 from __future__ import annotations
 
+import os
+import threading
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numba
@@ -32,6 +35,25 @@ from service.core.problem import Problem
 from service.core.schemas import OBJECTIVES, Objective
 
 __all__ = ["ConstraintGraph", "Evaluation", "Evaluator", "costs_from_completion"]
+
+# Least work (conflicts x samples) worth a thread of its own: below it, handing a share
+# of the samples to another thread costs more than walking them here.
+MIN_THREAD_WORK = 16_384
+
+# Threads that walk other threads' shares of a batch: one pool per process (rebuilt in a
+# forked child, which inherits the pool but not its threads); the kernel releases the GIL.
+_pool: tuple[int, ThreadPoolExecutor] | None = None
+_pool_lock = threading.Lock()
+
+
+def _shared_pool() -> ThreadPoolExecutor:
+    """This process's walking pool (threads are started on demand, up to the core count)."""
+    global _pool
+    with _pool_lock:
+        if _pool is None or _pool[0] != os.getpid():
+            pool = ThreadPoolExecutor(os.cpu_count(), thread_name_prefix="evaluate")
+            _pool = (os.getpid(), pool)
+        return _pool[1]
 
 
 @dataclass(frozen=True, eq=False)
@@ -193,10 +215,18 @@ def _relax_cyclic(
 
 
 class Evaluator:
-    """Evaluates batches of assignments of one problem; build once, call many times."""
+    """Evaluates batches of assignments of one problem; build once, call many times.
 
-    def __init__(self, problem: Problem) -> None:
+    ``threads`` > 1 walks a large batch's samples in that many shares at once (the same
+    numbers: each sample's walk is independent of the others); the solve's share of the
+    machine's cores, so it stays 1 where solves run side by side on every core.
+    """
+
+    def __init__(self, problem: Problem, threads: int = 1) -> None:
+        if threads < 1:
+            raise ValueError("threads must be at least 1")
         self.problem = problem
+        self.threads = threads
         tp_robot = problem.tp_robot
         self.n_events = problem.events.size
         self._chain_next = problem.event_next  # (E,)
@@ -249,22 +279,33 @@ class Evaluator:
         a_first = np.ascontiguousarray(assignments.a_first, dtype=bool).view(np.uint8)  # (S, M)
         following = np.ascontiguousarray(assignments.following, dtype=bool).view(np.uint8)  # (S, M)
         delay = np.zeros((assignments.n_samples, self.n_events + 1))  # (S, E+1), S may be 0
-        converged = _longest_paths(
-            self._chain_next,
-            self._chain_indeg,
-            self._target,
-            self._source,
-            self._offset,
-            self._live,
-            a_first,
-            following,
-            delay,
-        )
+        converged = self._walk(a_first, following, delay)
         completion = problem.tp_time[problem.last_tp] + delay[:, self._last_event]  # (S, R)
         costs = costs_from_completion(completion)
         costs["avg_delay"] = delay @ self._delay_weight
         costs = {k: np.where(converged, costs[k], np.inf) for k in OBJECTIVES}
         return Evaluation(delay, completion, costs, converged)
+
+    def _walk(self, a_first: np.ndarray, following: np.ndarray, delay: np.ndarray) -> np.ndarray:
+        """:func:`_longest_paths` over the batch, in up to ``threads`` shares of samples
+        run at once when the batch is large enough to pay for it -> converged (S,)."""
+        n_samples, n_conflicts = a_first.shape
+        shares = min(self.threads, n_samples, max(1, n_samples * n_conflicts // MIN_THREAD_WORK))
+        fixed = (
+            self._chain_next, self._chain_indeg, self._target, self._source, self._offset,
+            self._live,
+        )  # fmt: skip
+        if shares <= 1:
+            return _longest_paths(*fixed, a_first, following, delay)
+        bounds = np.linspace(0, n_samples, shares + 1).astype(np.int64)  # (shares+1,)
+        rows = [slice(lo, hi) for lo, hi in zip(bounds[:-1], bounds[1:], strict=True)]
+        pool = _shared_pool()
+        others = [
+            pool.submit(_longest_paths, *fixed, a_first[r], following[r], delay[r])
+            for r in rows[1:]
+        ]
+        first = _longest_paths(*fixed, a_first[rows[0]], following[rows[0]], delay[rows[0]])
+        return np.concatenate([first, *(f.result() for f in others)])
 
     def binding(
         self, assignments: Assignments, evaluation: Evaluation, sample: int = 0

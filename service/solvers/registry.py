@@ -37,7 +37,7 @@ class SolveContext:
     time_limit_s: float
     seed: int = 0
     samples: int | None = None
-    workers: int = 1
+    workers: int = 1  # cores of this solve: CP-SAT's workers and the evaluator's threads
     models: Mapping[str, StoredModel] = field(default_factory=dict)  # by objective
     # Sees every improving solution of an anytime solver (CP-SAT) as (wall s, assignment):
     # lets a benchmark measure how fast a method reaches a cost. None in the service.
@@ -60,7 +60,7 @@ class SolveContext:
 
     @cached_property
     def evaluator(self) -> Evaluator:
-        return Evaluator(self.problem)
+        return Evaluator(self.problem, threads=self.workers)
 
     @cached_property
     def decoder(self) -> Decoder:

@@ -7,7 +7,10 @@ from typing import Any
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
+from service.core import evaluate
 from service.core.assignment import Assignments
 from service.core.check import check
 from service.core.cliques import find_cliques
@@ -309,6 +312,34 @@ def test_batch_equals_one_by_one() -> None:
             assert together.converged[s] == alone.converged[0]
             for k in OBJECTIVES:  # avg_delay is a matrix product: equal up to rounding
                 assert together.costs[k][s] == pytest.approx(alone.costs[k][0], rel=1e-12)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    seed=st.integers(0, 10_000),
+    size=st.integers(1, 24),
+    threads=st.integers(2, 5),
+    stitched=st.booleans(),
+)
+def test_threads_change_no_number(seed: int, size: int, threads: int, stitched: bool) -> None:
+    """Walking a batch in several threads' shares gives exactly the one-thread answer,
+    cyclic (non-converging) samples included, whatever the split."""
+    request = stitched_problem(seed, 12, 2.5) if stitched else small_problem(seed)
+    problem = _problem(request)
+    batch = _random_batch(problem, seed, size)
+    one = Evaluator(problem).evaluate(batch)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(evaluate, "MIN_THREAD_WORK", 1)  # split even the smallest batch
+        many = Evaluator(problem, threads=threads).evaluate(batch)
+    np.testing.assert_array_equal(many.event_delay, one.event_delay)
+    np.testing.assert_array_equal(many.converged, one.converged)
+    for k in OBJECTIVES:
+        np.testing.assert_array_equal(many.costs[k], one.costs[k])
+
+
+def test_threads_must_be_positive() -> None:
+    with pytest.raises(ValueError, match="threads"):
+        Evaluator(_problem(small_problem(0)), threads=0)
 
 
 @pytest.mark.parametrize("seed", range(40))

@@ -14,6 +14,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from service.core import evaluate
 from service.core.check import check
 from service.core.schemas import OBJECTIVES
 from service.learning.generate import stitched_problem
@@ -89,6 +90,19 @@ def test_priority_search_improves_the_cheapest_blend(objective: str) -> None:
     assert rounds >= cfg.patience  # stopped on patience, not on time
     again = priority_search(ctx, 30.0, seed=1, cfg=cfg)
     assert again[1] == found and again[2] == rounds
+
+
+@pytest.mark.parametrize("name", ["tabu", "priority_tabu"])
+def test_two_cores_change_no_step_of_the_search(name: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A solve given two cores evaluates its batches in two threads: the same search,
+    step for step, as with one (the same answer when it stops on its own rules)."""
+    req = stitched_problem(7, 120, 4.0)
+    one = SOLVERS[name](_ctx(req, "avg_completion", seed=2))
+    monkeypatch.setattr(evaluate, "MIN_THREAD_WORK", 1)  # split every batch of two or more
+    two = SOLVERS[name](context(req, "avg_completion", 30.0, seed=2, workers=2))
+    assert two.detail == one.detail  # rounds and iterations
+    assert np.array_equal(two.assignment.a_first, one.assignment.a_first)
+    assert np.array_equal(two.assignment.following, one.assignment.following)
 
 
 def test_priority_search_moves_many_conflicts_at_once() -> None:
