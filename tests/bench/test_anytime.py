@@ -101,4 +101,6 @@ def test_quick_run_writes_everything(tmp_path: Path) -> None:
     assert {r["budget_s"] for r in rows} == set(QUICK.budgets)
     assert all(r["ratio"] <= 1 + 1e-9 for r in rows)
     assert any(not r["conformance"] for r in rows) and any(r["conformance"] for r in rows)
+    tables = (out / "tables.md").read_text()
+    assert all(f"`{m}` against issue 11's targets" in tables for m in ("auto", "auto_2cores"))
     assert main(["--quick", "--out", str(out), "--summarize"]) == 0  # re-renders from raw
