@@ -14,7 +14,7 @@ from service.core.check import check
 from service.core.problem import problem_from_request
 from service.core.schemas import OBJECTIVES, Objective, ScheduleRequest
 from service.learning.generate import small_problem, stitched_problem
-from service.solvers.exact import exact, solve, top_assignments
+from service.solvers.exact import build_seconds, exact, solve, top_assignments
 from service.solvers.fcfs import fcfs
 from service.solvers.registry import SolveContext
 from tests.reference import (
@@ -135,6 +135,23 @@ def test_trap_answer_is_acyclic() -> None:
         cost = _cost(ctx, result.assignment, objective)
         assert cost == pytest.approx(min(c.costs[objective] for c in best_acyclic), rel=REL)
         assert cost > ctx.evaluator.free_costs()[objective]
+
+
+def test_exact_declines_when_building_alone_would_overrun() -> None:
+    """Where the model's building estimate exceeds the limit, the solver answers None at
+    once (the dispatcher then answers FCFS) instead of building past the limit; given
+    the time, the same problem is solved."""
+    problem = problem_from_request(ScheduleRequest.model_validate(stitched_problem(1, 250, 4.0)))
+    ctx = SolveContext(problem, "avg_completion", 0.05)
+    assert build_seconds(problem, ctx.cliques) > 0.05
+    start = time.perf_counter()
+    assert exact(ctx) is None
+    assert time.perf_counter() - start < 0.05
+    roomy = SolveContext(problem, "avg_completion", 10 * build_seconds(problem, ctx.cliques))
+    roomy.__dict__["cliques"] = ctx.cliques
+    out = exact(roomy)
+    assert out is not None
+    assert check(problem, ctx.cliques, out.assignment).ok.tolist() == [True]
 
 
 def test_tiny_time_limit_is_honoured() -> None:
