@@ -18,12 +18,18 @@ sample without the GIL. It reads each sample's directions and types as they are
 numpy first cost 20-30 % of a batch of 8 on 250-robot warehouses, and walking
 one arc per conflict instead of filtering 2M slots made the walk 1.3-2x faster
 (8 samples of a two-way warehouse of 250 robots, 21,835 conflicts: 9.6 -> 4.7 ms).
+Grouping each arc's target and offset by source event (not its slot), so that the
+walk reads them in order, made it 1.4-1.6x faster again on warehouses of 100-250
+robots (the same 8 samples: 4.4 -> 2.8 ms). Candidates that each reverse a few
+conflicts of one assignment (:meth:`Evaluator.evaluate_flips`) share its grouped
+arcs: 1.6 ms for those 8 when each is one robot's priority shift.
 """
 
 from __future__ import annotations
 
 import os
 import threading
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -100,6 +106,113 @@ def costs_from_completion(completion: np.ndarray) -> dict[str, np.ndarray]:
 
 
 @numba.njit(cache=True, nogil=True)
+def _group_arcs(
+    target: np.ndarray,  # (2M,) int, event constrained by slot j
+    source: np.ndarray,  # (2, 2M) int, event read by slot j, by type (E = zero delay)
+    offset: np.ndarray,  # (2, 2M) float, T(source time point) - T(target time point)
+    live: np.ndarray,  # (2M,) bool, False for the slots of realized conflicts
+    a_first: np.ndarray,  # (M,) uint8 of one sample
+    following: np.ndarray,  # (M,) uint8 of one sample
+    chain_indeg: np.ndarray,  # (E,) int, 1 for every event with a previous one, else 0
+    indeg: np.ndarray,  # (E+1,) int, out: in-degrees (chain and conflict arcs)
+    out_start: np.ndarray,  # (E+3,) int, out: arcs of source e at out_start[e]:out_start[e+1]
+    out_to: np.ndarray,  # (M,) int, out: each arc's target event, grouped by source
+    out_off: np.ndarray,  # (M,) float, out: each arc's offset, in the same order
+    arc_of: np.ndarray,  # (M,) int, out: conflict c's arc position (-1: realized, no arc)
+) -> None:
+    """One sample's conflict arcs grouped by source event (a counting sort): conflict c
+    constrains through slot 2c + a_first[c] with type following[c].
+
+    Source E is the zero delay of time points before any event (walked first), so every
+    conflict is one arc, and an evaluation that reverses a few conflicts of this sample
+    (:func:`_longest_paths_flipped`) can take exactly their arcs out. The walk then reads
+    each arc's target and offset in order, not through its slot: 1.2-1.4x faster on
+    warehouses of 100-250 robots than reading target[j] and offset[t, j] while walking.
+    """
+    n_conflicts = a_first.size
+    indeg[:-1] = chain_indeg
+    indeg[-1] = 0
+    out_start[:] = 0
+    for c in range(n_conflicts):  # count arcs per source; arc_of holds each one's source
+        j = 2 * c + a_first[c]
+        arc_of[c] = -1
+        if live[j]:
+            src = source[following[c], j]
+            arc_of[c] = src
+            indeg[target[j]] += 1
+            out_start[src + 2] += 1
+    for e in range(out_start.size - 2):
+        out_start[e + 2] += out_start[e + 1]
+    for c in range(n_conflicts):
+        src = arc_of[c]
+        if src >= 0:
+            j = 2 * c + a_first[c]
+            pos = out_start[src + 1]
+            out_to[pos] = target[j]
+            out_off[pos] = offset[following[c], j]
+            out_start[src + 1] = pos + 1
+            arc_of[c] = pos
+
+
+@numba.njit(cache=True, nogil=True)
+def _walk_arcs(
+    chain_next: np.ndarray,  # (E,) int, next event of the same robot or -1
+    indeg: np.ndarray,  # (E+1,) int, consumed
+    out_start: np.ndarray,  # (E+3,) int, from _group_arcs
+    out_to: np.ndarray,  # (M,) int
+    out_off: np.ndarray,  # (M,) float
+    removed: np.ndarray,  # (M,) int, arc k is left out where removed[k] == stamp
+    stamp: int,
+    extra_head: np.ndarray,  # (E+1,) int, first extra arc of each source, -1: none
+    extra_next: np.ndarray,  # (X,) int, next extra arc of the same source, -1: none
+    extra_to: np.ndarray,  # (X,) int
+    extra_off: np.ndarray,  # (X,) float
+    d: np.ndarray,  # (E+1,) float, zeros (or lower bounds) on entry, least delays on exit
+    queue: np.ndarray,  # (E+1,) int, scratch
+) -> bool:  # every event reached (the constraint graph is acyclic)
+    """Kahn's walk from the zero-delay source E over the grouped arcs (less the removed,
+    plus the extra) and the robots' chains."""
+    n_events = chain_next.size
+    queue[0] = n_events
+    tail = 1
+    for e in range(n_events):
+        if indeg[e] == 0:
+            queue[tail] = e
+            tail += 1
+    head = 0
+    while head < tail:  # arcs into u raise d[u]; u is queued once its last arc is in
+        e = queue[head]
+        head += 1
+        de = d[e]
+        for k in range(out_start[e], out_start[e + 1]):
+            if removed[k] == stamp:
+                continue
+            u, value = out_to[k], de + out_off[k]
+            d[u] = max(d[u], value)
+            indeg[u] -= 1
+            if indeg[u] == 0:
+                queue[tail] = u
+                tail += 1
+        i = extra_head[e]
+        while i >= 0:
+            u, value = extra_to[i], de + extra_off[i]
+            d[u] = max(d[u], value)
+            indeg[u] -= 1
+            if indeg[u] == 0:
+                queue[tail] = u
+                tail += 1
+            i = extra_next[i]
+        u = chain_next[e] if e < n_events else -1
+        if u >= 0:
+            d[u] = max(d[u], de)
+            indeg[u] -= 1
+            if indeg[u] == 0:
+                queue[tail] = u
+                tail += 1
+    return tail == n_events + 1
+
+
+@numba.njit(cache=True, nogil=True)
 def _longest_paths(
     chain_next: np.ndarray,  # (E,) int, next event of the same robot or -1
     chain_indeg: np.ndarray,  # (E,) int, 1 for every event with a previous one, else 0
@@ -111,68 +224,108 @@ def _longest_paths(
     following: np.ndarray,  # (S, M) uint8, conflict c is following in sample s
     delay: np.ndarray,  # (S, E+1) float, zeros on entry; least delays on exit
 ) -> np.ndarray:  # (S,) bool, every event reached (the constraint graph is acyclic)
-    """Kahn's walk per sample over the arcs of its conflicts' slots and types.
-
-    Conflict c constrains through slot 2c + a_first[c] with type following[c]: one
-    arc per conflict, grouped by source event (a counting sort) before the walk.
-    """
+    """Kahn's walk per sample over the arcs of its conflicts' slots and types."""
     n_samples, n_conflicts = a_first.shape
     n_events = chain_next.size
     converged = np.ones(n_samples, dtype=np.bool_)
-    indeg = np.empty(n_events, dtype=np.int64)
-    out_start = np.empty(n_events + 2, dtype=np.int64)
-    out_slot = np.empty(n_conflicts, dtype=np.int64)  # 2 x slot + type, by source event
-    queue = np.empty(n_events, dtype=np.int64)
+    indeg = np.empty(n_events + 1, dtype=np.int64)
+    out_start = np.empty(n_events + 3, dtype=np.int64)
+    out_to = np.empty(n_conflicts, dtype=np.int64)
+    out_off = np.empty(n_conflicts, dtype=np.float64)
+    arc_of = np.empty(n_conflicts, dtype=np.int64)
+    removed = np.full(n_conflicts, -1, dtype=np.int64)  # nothing left out
+    extra_head = np.full(n_events + 1, -1, dtype=np.int64)  # nothing added
+    no_extra = np.empty(0, dtype=np.int64)
+    queue = np.empty(n_events + 1, dtype=np.int64)
     for s in range(n_samples):
-        d = delay[s]
-        indeg[:] = chain_indeg
-        out_start[:] = 0
-        for c in range(n_conflicts):
-            j = 2 * c + a_first[s, c]
-            if live[j]:
-                t = following[s, c]
-                src = source[t, j]
-                if src == n_events:  # no event before the source: reads delay 0
-                    d[target[j]] = max(d[target[j]], offset[t, j])
-                else:
-                    indeg[target[j]] += 1
-                    out_start[src + 2] += 1
-        for e in range(n_events):  # CSR of outgoing arcs per source event
-            out_start[e + 2] += out_start[e + 1]
-        for c in range(n_conflicts):
-            j = 2 * c + a_first[s, c]
-            t = following[s, c]
-            src = source[t, j]
-            if live[j] and src < n_events:
-                pos = out_start[src + 1]
-                out_slot[pos] = 2 * j + t
-                out_start[src + 1] = pos + 1
-        head, tail = 0, 0
-        for e in range(n_events):
-            if indeg[e] == 0:
-                queue[tail] = e
-                tail += 1
-        while head < tail:
-            e = queue[head]
-            head += 1
-            for k in range(out_start[e], out_start[e + 1]):
-                j, t = out_slot[k] >> 1, out_slot[k] & 1
-                u = target[j]
-                d[u] = max(d[u], d[e] + offset[t, j])
-                indeg[u] -= 1
-                if indeg[u] == 0:
-                    queue[tail] = u
-                    tail += 1
-            n = chain_next[e]
-            if n >= 0:
-                d[n] = max(d[n], d[e])
-                indeg[n] -= 1
-                if indeg[n] == 0:
-                    queue[tail] = n
-                    tail += 1
-        if tail < n_events:  # a cycle: least times exist only if no cycle forces a wait
+        _group_arcs(
+            target, source, offset, live, a_first[s], following[s], chain_indeg,
+            indeg, out_start, out_to, out_off, arc_of,
+        )  # fmt: skip
+        reached = _walk_arcs(
+            chain_next, indeg, out_start, out_to, out_off, removed, 0,
+            extra_head, no_extra, no_extra, out_off[:0], delay[s], queue,
+        )  # fmt: skip
+        if not reached:  # least times exist only if no cycle forces a wait
             converged[s] = _relax_cyclic(
-                chain_next, target, source, offset, live, a_first[s], following[s], d
+                chain_next, target, source, offset, live, a_first[s], following[s], delay[s]
+            )
+    return converged
+
+
+@numba.njit(cache=True, nogil=True)
+def _longest_paths_flipped(
+    chain_next: np.ndarray,  # (E,) int
+    chain_indeg: np.ndarray,  # (E,) int
+    target: np.ndarray,  # (2M,) int
+    source: np.ndarray,  # (2, 2M) int
+    offset: np.ndarray,  # (2, 2M) float
+    live: np.ndarray,  # (2M,) bool
+    a_first: np.ndarray,  # (M,) uint8, the base sample's directions
+    following: np.ndarray,  # (M,) uint8, the base sample's types (every candidate's)
+    start: np.ndarray,  # (C+1,) int, candidate s reverses flipped[start[s]:start[s+1]]
+    flipped: np.ndarray,  # (K,) int, conflicts, distinct within each candidate
+    delay: np.ndarray,  # (C, E+1) float, zeros on entry; least delays on exit
+) -> np.ndarray:  # (C,) bool, every event reached
+    """:func:`_longest_paths` of candidates that each reverse a few conflicts of one base
+    sample: the base's arcs are grouped once, and each candidate's walk leaves out the
+    arcs of its reversed conflicts and adds their other slots' arcs (the same arcs, so
+    the same numbers, as grouping the candidate's own)."""
+    n_conflicts = a_first.size
+    n_events = chain_next.size
+    n_candidates = start.size - 1
+    converged = np.ones(n_candidates, dtype=np.bool_)
+    base_indeg = np.empty(n_events + 1, dtype=np.int64)
+    out_start = np.empty(n_events + 3, dtype=np.int64)
+    out_to = np.empty(n_conflicts, dtype=np.int64)
+    out_off = np.empty(n_conflicts, dtype=np.float64)
+    arc_of = np.empty(n_conflicts, dtype=np.int64)
+    _group_arcs(
+        target, source, offset, live, a_first, following, chain_indeg,
+        base_indeg, out_start, out_to, out_off, arc_of,
+    )  # fmt: skip
+    most = 0
+    for s in range(n_candidates):
+        most = max(most, start[s + 1] - start[s])
+    removed = np.full(n_conflicts, -1, dtype=np.int64)
+    extra_head = np.full(n_events + 1, -1, dtype=np.int64)
+    extra_next = np.empty(most, dtype=np.int64)
+    extra_to = np.empty(most, dtype=np.int64)
+    extra_off = np.empty(most, dtype=np.float64)
+    indeg = np.empty(n_events + 1, dtype=np.int64)
+    queue = np.empty(n_events + 1, dtype=np.int64)
+    for s in range(n_candidates):
+        indeg[:] = base_indeg
+        n_extra = 0
+        for i in range(start[s], start[s + 1]):
+            c = flipped[i]
+            old = 2 * c + a_first[c]
+            if not live[old]:  # realized: neither slot constrains
+                continue
+            if removed[arc_of[c]] == s:
+                raise ValueError("a candidate lists a conflict twice")
+            removed[arc_of[c]] = s
+            indeg[target[old]] -= 1
+            j, t = old ^ 1, following[c]
+            extra_to[n_extra] = target[j]
+            extra_off[n_extra] = offset[t, j]
+            extra_next[n_extra] = extra_head[source[t, j]]
+            extra_head[source[t, j]] = n_extra
+            indeg[target[j]] += 1
+            n_extra += 1
+        reached = _walk_arcs(
+            chain_next, indeg, out_start, out_to, out_off, removed, s,
+            extra_head, extra_next, extra_to, extra_off, delay[s], queue,
+        )  # fmt: skip
+        for i in range(start[s], start[s + 1]):
+            c = flipped[i]
+            extra_head[source[following[c], 2 * c + 1 - a_first[c]]] = -1
+        if not reached:
+            own = a_first.copy()
+            for i in range(start[s], start[s + 1]):
+                own[flipped[i]] ^= 1
+            converged[s] = _relax_cyclic(
+                chain_next, target, source, offset, live, own, following, delay[s]
             )
     return converged
 
@@ -275,36 +428,76 @@ class Evaluator:
 
     def evaluate(self, assignments: Assignments) -> Evaluation:
         """Least updated times and costs of every assignment in the batch."""
-        problem = self.problem
         a_first = np.ascontiguousarray(assignments.a_first, dtype=bool).view(np.uint8)  # (S, M)
         following = np.ascontiguousarray(assignments.following, dtype=bool).view(np.uint8)  # (S, M)
         delay = np.zeros((assignments.n_samples, self.n_events + 1))  # (S, E+1), S may be 0
-        converged = self._walk(a_first, following, delay)
+
+        def walk(rows: slice) -> np.ndarray:
+            return _longest_paths(*self._fixed, a_first[rows], following[rows], delay[rows])
+
+        return self._evaluation(delay, self._in_shares(walk, assignments.n_samples))
+
+    def evaluate_flips(
+        self,
+        base: Assignments,
+        start: np.ndarray,  # (C+1,) int, candidate i reverses flipped[start[i]:start[i+1]]
+        flipped: np.ndarray,  # (K,) int, conflicts, distinct within each candidate
+    ) -> Evaluation:
+        """The C assignments that each reverse a few conflicts of the single assignment
+        ``base`` (types unchanged): the same numbers as :meth:`evaluate` of them, without
+        building them or grouping each one's arcs (which is 40 % of a full evaluation).
+
+        Local searches that move many conflicts at once (robot-priority search) evaluate
+        their candidates this way; the walk itself stays whole, since a reversal's
+        effect reaches most events of a congested warehouse.
+
+        Raises:
+            ValueError: ``base`` is not one assignment, or a candidate lists a (live)
+                conflict twice.
+        """
+        if base.n_samples != 1:
+            raise ValueError("base must be a single assignment")
+        start, flipped = np.asarray(start, dtype=np.int64), np.asarray(flipped, dtype=np.int64)
+        a_first = np.ascontiguousarray(base.a_first[0], dtype=bool).view(np.uint8)  # (M,)
+        following = np.ascontiguousarray(base.following[0], dtype=bool).view(np.uint8)  # (M,)
+        delay = np.zeros((start.size - 1, self.n_events + 1))  # (C, E+1)
+
+        def walk(rows: slice) -> np.ndarray:
+            return _longest_paths_flipped(
+                *self._fixed, a_first, following, start[rows.start : rows.stop + 1], flipped,
+                delay[rows],
+            )  # fmt: skip
+
+        return self._evaluation(delay, self._in_shares(walk, start.size - 1))
+
+    @property
+    def _fixed(self) -> tuple[np.ndarray, ...]:
+        """The kernels' fixed arrays: chains, then the conflict slots."""
+        return (
+            self._chain_next, self._chain_indeg, self._target, self._source, self._offset,
+            self._live,
+        )  # fmt: skip
+
+    def _evaluation(self, delay: np.ndarray, converged: np.ndarray) -> Evaluation:
+        """Completions and costs from walked delays (S, E+1) and converged flags (S,)."""
+        problem = self.problem
         completion = problem.tp_time[problem.last_tp] + delay[:, self._last_event]  # (S, R)
         costs = costs_from_completion(completion)
         costs["avg_delay"] = delay @ self._delay_weight
         costs = {k: np.where(converged, costs[k], np.inf) for k in OBJECTIVES}
         return Evaluation(delay, completion, costs, converged)
 
-    def _walk(self, a_first: np.ndarray, following: np.ndarray, delay: np.ndarray) -> np.ndarray:
-        """:func:`_longest_paths` over the batch, in up to ``threads`` shares of samples
-        run at once when the batch is large enough to pay for it -> converged (S,)."""
-        n_samples, n_conflicts = a_first.shape
-        shares = min(self.threads, n_samples, max(1, n_samples * n_conflicts // MIN_THREAD_WORK))
-        fixed = (
-            self._chain_next, self._chain_indeg, self._target, self._source, self._offset,
-            self._live,
-        )  # fmt: skip
+    def _in_shares(self, walk: Callable[[slice], np.ndarray], n_samples: int) -> np.ndarray:
+        """``walk`` of every row of a batch, in up to ``threads`` shares of rows run at once
+        when the batch is large enough to pay for it -> its converged flags (S,)."""
+        work = n_samples * self.problem.n_conflicts
+        shares = min(self.threads, n_samples, max(1, work // MIN_THREAD_WORK))
         if shares <= 1:
-            return _longest_paths(*fixed, a_first, following, delay)
+            return walk(slice(0, n_samples))
         bounds = np.linspace(0, n_samples, shares + 1).astype(np.int64)  # (shares+1,)
         rows = [slice(lo, hi) for lo, hi in zip(bounds[:-1], bounds[1:], strict=True)]
-        pool = _shared_pool()
-        others = [
-            pool.submit(_longest_paths, *fixed, a_first[r], following[r], delay[r])
-            for r in rows[1:]
-        ]
-        first = _longest_paths(*fixed, a_first[rows[0]], following[rows[0]], delay[rows[0]])
+        others = [_shared_pool().submit(walk, r) for r in rows[1:]]
+        first = walk(rows[0])
         return np.concatenate([first, *(f.result() for f in others)])
 
     def binding(

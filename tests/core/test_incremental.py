@@ -18,6 +18,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from service.core import evaluate
 from service.core.assignment import Assignments
 from service.core.cliques import find_cliques
 from service.core.decode import Decoder
@@ -248,3 +249,56 @@ def test_best_move_leaves_losing_moves_uncosted_on_a_congested_graph() -> None:
     weight = incremental._last_weight
     _, cut = incremental._costs(base, evaluation, moves, 0, (weight, tabu, np.inf, 1e-9))
     assert moves.size > 20 and cut.mean() > 0.3
+
+
+@settings(max_examples=80, deadline=None)
+@given(
+    kind=KINDS,
+    seed=SEEDS,
+    draw=DRAWS,
+    candidates=st.integers(0, 6),
+    decoded=st.booleans(),
+    threads=st.sampled_from([1, 3]),
+)
+def test_flipped_candidates_equal_the_full_evaluator(
+    kind: str, seed: int, draw: int, candidates: int, decoded: bool, threads: int
+) -> None:
+    """Candidates that each reverse a few conflicts of one base, evaluated from the base's
+    grouped arcs, get exactly the full evaluator's delays, costs and convergence (cyclic
+    candidates and bases, realized conflicts, split over threads included)."""
+    decoder, incremental, _ = _setup(kind, seed)
+    problem = decoder.problem
+    rng = np.random.default_rng(draw)
+    if decoded:
+        base = _decoded(decoder, draw)
+    else:  # any directions and types: cycles too
+        shape = (1, problem.n_conflicts)
+        base = Assignments(rng.random(shape) < 0.5, rng.random(shape) < 0.5)
+    sizes = rng.integers(0, problem.n_conflicts + 1, size=candidates)  # (C,)
+    flipped = [rng.choice(problem.n_conflicts, size=n, replace=False) for n in sizes]
+    start = np.concatenate([[0], np.cumsum(sizes)])  # (C+1,)
+    a_first = np.repeat(base.a_first, candidates, axis=0)  # (C, M)
+    for i, conflicts in enumerate(flipped):
+        a_first[i, conflicts] ^= True
+    want = Evaluator(problem).evaluate(
+        Assignments(a_first, np.repeat(base.following, candidates, axis=0))
+    )
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(evaluate, "MIN_THREAD_WORK", 1)  # split even the smallest batch
+        got = Evaluator(problem, threads=threads).evaluate_flips(
+            base, start, np.concatenate([np.zeros(0, dtype=np.int64), *flipped])
+        )
+    np.testing.assert_array_equal(got.event_delay, want.event_delay)
+    np.testing.assert_array_equal(got.converged, want.converged)
+    for k in OBJECTIVES:
+        np.testing.assert_array_equal(got.costs[k], want.costs[k])
+
+
+def test_a_candidate_listing_a_conflict_twice_is_refused() -> None:
+    decoder, _, _ = _setup("small", 0)
+    base = _decoded(decoder, 0)
+    evaluator = Evaluator(decoder.problem)
+    with pytest.raises(ValueError, match="twice"):
+        evaluator.evaluate_flips(base, np.array([0, 2]), np.array([1, 1]))
+    with pytest.raises(ValueError, match="single"):
+        evaluator.evaluate_flips(base.take(np.array([0, 0])), np.array([0]), np.array([]))

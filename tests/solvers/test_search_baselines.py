@@ -25,7 +25,8 @@ from service.solvers.priority import (
     RankFlips,
     priority_search,
     priority_tabu,
-    shifted_directions,
+    reversed_in,
+    shifted_flips,
 )
 from service.solvers.tabu import TabuConfig, tabu, tabu_search
 from tests.reference import feasible_assignments, fix_directions, reference_problem, tiny_request
@@ -121,7 +122,7 @@ def test_priority_search_moves_many_conflicts_at_once() -> None:
     share=st.sampled_from([0.0, 0.2, 0.6]),
     scale=st.sampled_from([0.01, 0.1, 1.0]),
 )
-def test_shifted_directions_equal_decoding_the_shifted_ranks_whole(
+def test_shifted_flips_equal_decoding_the_shifted_ranks_whole(
     seed: int, robots: int, share: float, scale: float
 ) -> None:
     """Only the conflicts of nodes whose repaired rank moved are looked at, yet every
@@ -137,9 +138,14 @@ def test_shifted_directions_equal_decoding_the_shifted_ranks_whole(
     best = ctx.decoder.decode_ranks(current, np.zeros((1, p.n_conflicts)))
     robot = rng.integers(p.n_robots, size=12)  # (D,)
     shifted = offsets[robot] + rng.normal(0.0, scale * span, robot.size)  # (D,)
-    moved, a_first, moved_ranks = shifted_directions(
+    moved, start, flipped, moved_ranks = shifted_flips(
         ctx, RankFlips(p), robot, shifted, base, offsets, ranks[0], best, robot.size
     )
+    pairs = zip(start[:-1], start[1:], strict=True)
+    a_first = np.concatenate(
+        [reversed_in(best, flipped[lo:hi]).a_first for lo, hi in pairs]
+        or [np.zeros((0, p.n_conflicts), dtype=bool)]
+    )  # (C, M)
     trial = np.repeat(offsets[None], robot.size, axis=0)  # (D, R)
     trial[np.arange(robot.size), robot] = shifted
     whole = ctx.decoder.directions(base[None] + trial[:, p.node_robot])  # (D, M)
