@@ -155,6 +155,19 @@ def _group_arcs(
 
 
 @numba.njit(cache=True, nogil=True)
+def _arc_arrays(n_events: int, n_conflicts: int) -> tuple:
+    """Empty outputs of :func:`_group_arcs`: indeg (E+1,), out_start (E+3,), out_to (M,),
+    out_off (M,), arc_of (M,)."""
+    return (
+        np.empty(n_events + 1, dtype=np.int64),
+        np.empty(n_events + 3, dtype=np.int64),
+        np.empty(n_conflicts, dtype=np.int64),
+        np.empty(n_conflicts, dtype=np.float64),
+        np.empty(n_conflicts, dtype=np.int64),
+    )
+
+
+@numba.njit(cache=True, nogil=True)
 def _walk_arcs(
     chain_next: np.ndarray,  # (E,) int, next event of the same robot or -1
     indeg: np.ndarray,  # (E+1,) int, consumed
@@ -180,31 +193,26 @@ def _walk_arcs(
             queue[tail] = e
             tail += 1
     head = 0
-    while head < tail:  # arcs into u raise d[u]; u is queued once its last arc is in
+    while head < tail:
         e = queue[head]
         head += 1
         de = d[e]
-        for k in range(out_start[e], out_start[e + 1]):
-            if removed[k] == stamp:
-                continue
-            u, value = out_to[k], de + out_off[k]
-            d[u] = max(d[u], value)
-            indeg[u] -= 1
-            if indeg[u] == 0:
-                queue[tail] = u
-                tail += 1
-        i = extra_head[e]
-        while i >= 0:
-            u, value = extra_to[i], de + extra_off[i]
-            d[u] = max(d[u], value)
-            indeg[u] -= 1
-            if indeg[u] == 0:
-                queue[tail] = u
-                tail += 1
-            i = extra_next[i]
-        u = chain_next[e] if e < n_events else -1
-        if u >= 0:
-            d[u] = max(d[u], de)
+        # Out of e: its grouped arcs (k), then its extra ones (i), then its chain arc.
+        k, end, i = out_start[e], out_start[e + 1], extra_head[e]
+        chain = chain_next[e] if e < n_events else -1
+        while True:
+            if k < end:
+                k += 1
+                if removed[k - 1] == stamp:
+                    continue
+                u, value = out_to[k - 1], de + out_off[k - 1]
+            elif i >= 0:
+                u, value, i = extra_to[i], de + extra_off[i], extra_next[i]
+            elif chain >= 0:
+                u, value, chain = chain, de, -1
+            else:
+                break
+            d[u] = max(d[u], value)  # every arc into u raises it; u goes once all are in
             indeg[u] -= 1
             if indeg[u] == 0:
                 queue[tail] = u
@@ -228,11 +236,7 @@ def _longest_paths(
     n_samples, n_conflicts = a_first.shape
     n_events = chain_next.size
     converged = np.ones(n_samples, dtype=np.bool_)
-    indeg = np.empty(n_events + 1, dtype=np.int64)
-    out_start = np.empty(n_events + 3, dtype=np.int64)
-    out_to = np.empty(n_conflicts, dtype=np.int64)
-    out_off = np.empty(n_conflicts, dtype=np.float64)
-    arc_of = np.empty(n_conflicts, dtype=np.int64)
+    indeg, out_start, out_to, out_off, arc_of = _arc_arrays(n_events, n_conflicts)
     removed = np.full(n_conflicts, -1, dtype=np.int64)  # nothing left out
     extra_head = np.full(n_events + 1, -1, dtype=np.int64)  # nothing added
     no_extra = np.empty(0, dtype=np.int64)
@@ -275,11 +279,7 @@ def _longest_paths_flipped(
     n_events = chain_next.size
     n_candidates = start.size - 1
     converged = np.ones(n_candidates, dtype=np.bool_)
-    base_indeg = np.empty(n_events + 1, dtype=np.int64)
-    out_start = np.empty(n_events + 3, dtype=np.int64)
-    out_to = np.empty(n_conflicts, dtype=np.int64)
-    out_off = np.empty(n_conflicts, dtype=np.float64)
-    arc_of = np.empty(n_conflicts, dtype=np.int64)
+    base_indeg, out_start, out_to, out_off, arc_of = _arc_arrays(n_events, n_conflicts)
     _group_arcs(
         target, source, offset, live, a_first, following, chain_indeg,
         base_indeg, out_start, out_to, out_off, arc_of,
