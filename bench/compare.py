@@ -47,6 +47,7 @@ from bench.report import (
     machine_info,
     nanmean,
     reference_cache,
+    save_figure,
     write_csv,
     write_json,
 )
@@ -443,9 +444,7 @@ def plot_comparison(summary: Sequence[dict[str, Any]], objective: str, path: Pat
                 ax.grid(True, which="both", alpha=0.3)
         axes[2, col].set_yscale("log")
     axes[0, 0].legend(fontsize="small")
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def _set_label(density: str) -> str:
@@ -486,9 +485,7 @@ def plot_ablation(summary: Sequence[dict[str, Any]], path: Path) -> None:
     for ax in axes:
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize="small")
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def report(results: dict[str, Any], out: Path) -> str:

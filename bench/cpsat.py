@@ -54,6 +54,7 @@ from bench.report import (
     jsonable,
     machine_info,
     nanmean,
+    save_figure,
     write_csv,
     write_json,
 )
@@ -427,9 +428,7 @@ def plot(summary: Sequence[dict[str, Any]], budgets: Sequence[float], path: Path
         ax.grid(True, axis="x", alpha=0.3)
     axes[1].legend(title="budget", fontsize="small")
     fig.suptitle("CP-SAT configurations on the conformance sets (wh 25-100, geo dense 25)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def _yardstick(objective: str | None) -> str:

@@ -48,6 +48,7 @@ from bench.report import (
     fmt,
     jsonable,
     machine_info,
+    save_figure,
     write_csv,
     write_json,
 )
@@ -575,9 +576,7 @@ def plot(summary: Sequence[dict[str, Any]], budget_s: float, path: Path) -> None
         ax.grid(True, which="both", alpha=0.3)
         if ax.get_legend_handles_labels()[0]:  # a panel of a mode not run stays empty
             ax.legend(fontsize="small")
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def report(results: dict[str, Any], out: Path) -> str:

@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from bench.report import delay_ratio
+from bench.report import delay_ratio, save_figure
 from service.core.cliques import find_cliques
 from service.core.decode import Decoder
 from service.core.evaluate import Evaluator
@@ -368,8 +368,7 @@ def plot_large(rows: list[dict[str, Any]], path: Path) -> None:
     for ax in axes:
         ax.legend()
         ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    save_figure(fig, path)
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -35,7 +35,7 @@ from bench.cases import (
     run_cli,
     world_cases,
 )
-from bench.report import jsonable, machine_info, markdown_table, write_csv, write_json
+from bench.report import jsonable, machine_info, markdown_table, save_figure, write_csv, write_json
 from service.memory import settle
 from service.solvers.exact import solve
 from service.solvers.fcfs import fcfs
@@ -173,9 +173,7 @@ def plot(rows: Sequence[dict[str, Any]], limit_s: float, path: Path) -> None:
     ax.set(xlabel="seconds", ylabel="share proven optimal", ylim=(0, 1.02))
     ax.grid(True, alpha=0.3)
     ax.legend()
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def report(results: dict[str, Any], out: Path) -> str:

@@ -56,6 +56,7 @@ from bench.report import (
     machine_info,
     nanmean,
     reference_cache,
+    save_figure,
     write_csv,
     write_json,
 )
@@ -540,9 +541,7 @@ def plot_paths(summary: Sequence[dict[str, Any]], path: Path) -> None:
                 ax.grid(True, which="both", alpha=0.3)
         axes[1, col].set_yscale("log")
     axes[0, 0].legend(fontsize="small")
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def _load(machine: dict[str, Any]) -> str:

@@ -46,6 +46,7 @@ from bench.report import (
     jsonable,
     machine_info,
     markdown_table,
+    save_figure,
     write_results,
 )
 from service.core.evaluate import Evaluator
@@ -291,9 +292,7 @@ def plot(summary: Sequence[dict[str, Any]], path: Path) -> None:
     for ax in axes:
         ax.legend()
         ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path, dpi=120)
 
 
 def report(results: dict[str, Any], out: Path) -> str:

@@ -33,6 +33,7 @@ __all__ = [
     "plot_lines",
     "plot_solve_times",
     "reference_cache",
+    "save_figure",
     "summarize_solves",
     "write_csv",
     "write_json",
@@ -260,6 +261,18 @@ def write_results(
     write_csv(out / "results.csv", rows)
 
 
+def save_figure(
+    fig: Any, path: Path, dpi: int = 100, rect: tuple[float, float, float, float] | None = None
+) -> None:
+    """Lay out ``fig`` (within ``rect``, figure fractions, to leave room for a legend
+    below), write it to ``path`` and free it (pyplot keeps every open figure)."""
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout(rect=rect)
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+
+
 def plot_solve_times(summary: Sequence[dict[str, Any]], time_limit_s: float, path: Path) -> None:
     """Solve-time p50 and p95 against robot count, one panel per objective (log scale).
 
@@ -318,9 +331,7 @@ def plot_solve_times(summary: Sequence[dict[str, Any]], time_limit_s: float, pat
     fig.legend(handles, labels, loc="lower center", ncol=3, fontsize="small", frameon=False)
     fig.suptitle("CP-SAT exact solve time by problem size")
     legend_rows = -(-(2 * len(series) + 1) // 3)  # ceil(entries / 3 columns)
-    fig.tight_layout(rect=(0, (0.045 * legend_rows + 0.02) / nrows, 1, 1))
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path, dpi=120, rect=(0, (0.045 * legend_rows + 0.02) / nrows, 1, 1))
 
 
 def plot_lines(
@@ -372,6 +383,4 @@ def plot_lines(
     handles, labels = axes[0, 0].get_legend_handles_labels()
     ncol = min(len(labels), 2 * cols)  # about two entries fit beside each other per panel
     fig.legend(handles, labels, loc="lower center", ncol=ncol, frameon=False)
-    fig.tight_layout(rect=(0, 0.06 * -(-len(labels) // ncol) / nrows, 1, 1))
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save_figure(fig, path, rect=(0, 0.06 * -(-len(labels) // ncol) / nrows, 1, 1))
