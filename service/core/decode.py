@@ -301,7 +301,8 @@ class Decoder:
 def decode_candidates(
     decoder: Decoder, bids: np.ndarray, scores: np.ndarray, objective: Objective
 ) -> Assignments:
-    """Valid assignments from bids (S, V) > 0 and scores (S, M): S of them, or 2S.
+    """Valid assignments from bids (S, V) > 0 and scores (S, M), or (1, M) shared by every
+    row (types are then decoded once): S of them, or 2S.
 
     For a monotone objective every clique budget is filled greedily by score.
     For the others (sync_completion) filling can hurt, so each row is decoded
@@ -309,8 +310,14 @@ def decode_candidates(
     probability's threshold), rows S..2S-1 fill the budgets like the monotone case.
     """
     ranks = decoder.ranks(bids)
-    a_first = decoder.directions(ranks)
+    a_first = decoder.directions(ranks)  # (S, M)
+    rows = len(a_first)
+
+    def types(threshold: float | None = None) -> np.ndarray:  # (S, M)
+        following = decoder.types(scores, threshold)  # (S, M) or (1, M)
+        return np.repeat(following, rows, axis=0) if len(following) < rows else following
+
     if objective in MONOTONE:
-        return Assignments(a_first, decoder.types(scores))
-    following = np.concatenate([decoder.types(scores, 0.5), decoder.types(scores)])
+        return Assignments(a_first, types())
+    following = np.concatenate([types(0.5), types()])
     return Assignments(np.concatenate([a_first, a_first]), following)

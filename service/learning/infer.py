@@ -25,6 +25,7 @@ from service.learning.model import GnnVae
 __all__ = [
     "BID_NOISE",
     "CHUNK_BYTES",
+    "SHARED_TYPES_MIN_CONFLICTS",
     "Sampled",
     "chunk_rows",
     "propose",
@@ -47,6 +48,16 @@ HEAD_BYTES_PER_CELL = 12  # per node or conflict and hidden unit
 FIRST_TIMED_ROWS = 8
 DECODE_BYTES_PER_CELL = 16  # per robot and position along the longest path
 
+# Above this many conflicts every draw shares the mode's (z = 0) following-type
+# probabilities, and the decoder fills the clique budgets once: per-draw type logits were
+# most of a request's time there (the edge head is a (draws, M, hidden) pass: ~0.8 s of
+# 1.5-2 s for 100 draws at 21,000 conflicts) and bought nothing, since the trained VAE uses
+# its latent little. Measured on ten held-out worlds of 100-250 robots (wh_two_lane,
+# wh_mixed, wh_two_way; avg_completion, best of 100): summed cost 11,151.2 per draw and
+# 11,150.9 shared (per world -1.5 % to +0.5 %), 2-5x faster (250 robots 1.5-3.9 s ->
+# 0.4-1.3 s). Small problems keep per-draw types (issue 3's figures were measured so).
+SHARED_TYPES_MIN_CONFLICTS = 1_000
+
 # Largest log-std of the multiplicative bid perturbation (see :func:`propose`);
 # picked on validation problems among 0.3, 0.5 and 1.0.
 BID_NOISE = 0.5
@@ -64,9 +75,16 @@ class Sampled:
 def chunk_rows(problem: Problem, hidden: int) -> int:
     """Samples handled at once: as many as fit :data:`CHUNK_BYTES`, at least one."""
     longest = int(np.diff(problem.robot_start).max())
-    heads = HEAD_BYTES_PER_CELL * hidden * (problem.node_density.size + problem.n_conflicts)
+    per_draw = 0 if shares_types(problem.n_conflicts) else problem.n_conflicts
+    heads = HEAD_BYTES_PER_CELL * hidden * (problem.node_density.size + per_draw)
     decode = DECODE_BYTES_PER_CELL * problem.n_robots * longest
     return max(1, CHUNK_BYTES // (heads + decode))
+
+
+def shares_types(n_conflicts: int) -> bool:
+    """Whether every draw of a graph with ``n_conflicts`` shares the mode's following-type
+    probabilities (see :data:`SHARED_TYPES_MIN_CONFLICTS`)."""
+    return n_conflicts > SHARED_TYPES_MIN_CONFLICTS
 
 
 def propose(
@@ -74,7 +92,8 @@ def propose(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Bids and following probabilities of ``samples`` draws, in one batch.
 
-    Shapes: -> bids (S, V) float64 > 0, probabilities (S, M) float64.
+    Shapes: -> bids (S, V) float64 > 0, probabilities (S, M) float64, or (1, M) shared
+    by every draw (:func:`shares_types`).
     """
     return next(propose_chunks(model, graph, samples, seed, rows=samples))
 
@@ -102,9 +121,12 @@ def propose_chunks(
     has ``first`` draws (default ``rows``); ``send(n)`` instead of ``next()`` asks
     for a next chunk of n draws, at most ``rows`` (a time-sized chunk).
     ``scored`` (M',) int: the only conflicts whose probability is computed (the ones the
-    decoder reads, :meth:`Decoder.scored`); the others get 0. Default: all.
+    decoder reads, :meth:`Decoder.scored`); the others get 0. Default: all. Above
+    SHARED_TYPES_MIN_CONFLICTS conflicts they are computed once, at the mode (draw 0's
+    z = 0), and shared by every draw.
 
-    Shapes: -> per chunk of n draws: bids (n, V) float64 > 0, probabilities (n, M) float64.
+    Shapes: -> per chunk of n draws: bids (n, V) float64 > 0, probabilities (n, M)
+    float64, or (1, M) shared by the n draws.
     """
     gen = torch.Generator().manual_seed(int(seed))
     ladder = torch.linspace(0.0, 1.0, samples)[:, None] if samples > 1 else torch.zeros(1, 1)
@@ -114,15 +136,35 @@ def propose_chunks(
     n_conf = graph.conf.shape[0]
     scored = np.arange(n_conf) if scored is None else scored  # (M',)
     conf = graph.conf[torch.from_numpy(scored)].T.contiguous()  # (2, M')
+    shared = _probabilities(model, h, conf, z[:1], scored, n_conf) if shares_types(n_conf) else None
     lo, n = 0, rows if first is None else max(1, min(first, rows))
     while lo < samples:
-        bids, logits = model.sample_heads(h, conf, z[lo : lo + n])  # (n, V), (n, M')
+        if shared is None:
+            bids, logits = model.sample_heads(h, conf, z[lo : lo + n])  # (n, V), (n, M')
+            probs = _probabilities(model, h, conf, z[lo : lo + n], scored, n_conf, logits)
+        else:
+            bids, probs = model.sample_bids(h, z[lo : lo + n]), shared  # (n, V), (1, M)
         bids = bids * noise[lo : lo + n].exp()
         lo += n
-        probs = np.zeros((len(bids), n_conf))  # (n, M)
-        probs[:, scored] = torch.sigmoid(logits).double().numpy()
         asked = yield bids.double().numpy(), probs
         n = rows if asked is None else max(1, min(int(asked), rows))
+
+
+def _probabilities(
+    model: GnnVae,
+    h: torch.Tensor,  # (V, H)
+    conf: torch.Tensor,  # (2, M')
+    z: torch.Tensor,  # (n, Z)
+    scored: np.ndarray,  # (M',)
+    n_conf: int,
+    logits: torch.Tensor | None = None,  # (n, M'), if the heads already gave them
+) -> np.ndarray:  # (n, M) float64, 0 where not scored
+    """Following-type probabilities of n latents, laid out over all M conflicts."""
+    if logits is None:
+        logits = model.edge_head(model.pair_features(h, conf), z, per_sample=True)
+    probs = np.zeros((len(z), n_conf))
+    probs[:, scored] = torch.sigmoid(logits).double().numpy()
+    return probs
 
 
 def sample_best(

@@ -149,6 +149,10 @@ class GnnVae(nn.Module):
         ha, hb = h[conf[0]], h[conf[1]]
         return torch.cat([ha + hb, ha * hb], dim=-1)
 
+    def sample_bids(self, h: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
+        """Bids for S latent samples of one graph. Shapes: h (V, H), z (S, Z) -> (S, V) > 0."""
+        return F.softplus(self.bid_head(h, z, per_sample=True)) + MIN_BID
+
     def sample_heads(
         self, h: torch.Tensor, conf: torch.Tensor, z: torch.Tensor
     ) -> tuple[torch.Tensor, torch.Tensor]:
@@ -156,7 +160,7 @@ class GnnVae(nn.Module):
 
         Shapes: h (V, H), conf (2, M), z (S, Z) -> bids (S, V) > 0, logits (S, M).
         """
-        bids = F.softplus(self.bid_head(h, z, per_sample=True)) + MIN_BID
+        bids = self.sample_bids(h, z)
         logits = self.edge_head(self.pair_features(h, conf), z, per_sample=True)
         return bids, logits
 

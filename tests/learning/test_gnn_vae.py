@@ -20,6 +20,7 @@ from service.core.evaluate import Evaluator
 from service.core.problem import problem_from_request
 from service.core.schemas import OBJECTIVES, ScheduleRequest
 from service.datagen.build import DatasetConfig, build_dataset, solve_problem
+from service.learning import infer
 from service.learning.dataset import examples_from_records, to_data
 from service.learning.features import NODE_DIM, graph_tensors
 from service.learning.generate import GeneratorConfig, small_problem, stitched_problem
@@ -109,7 +110,8 @@ def test_decoded_samples_are_always_valid(seed: int, z_seed: int, big: bool) -> 
     torch.manual_seed(seed)
     model = GnnVae(TINY).eval()
     bids, probs = propose(model, graph_tensors(problem, cliques), samples=8, seed=z_seed)
-    assert bids.shape == (8, problem.n_nodes) and probs.shape == (8, problem.n_conflicts)
+    rows = 1 if infer.shares_types(problem.n_conflicts) else 8
+    assert bids.shape == (8, problem.n_nodes) and probs.shape == (rows, problem.n_conflicts)
     for objective in OBJECTIVES:
         candidates = decode_candidates(Decoder(problem, cliques), bids, probs, objective)
         assert check(problem, cliques, candidates).ok.all()
@@ -136,6 +138,33 @@ def test_scoring_only_the_conflicts_the_decoder_reads_decodes_the_same(
     cut = decode_candidates(decoder, bids_s, probs_s, objective)
     assert np.array_equal(full.a_first, cut.a_first)
     assert np.array_equal(full.following, cut.following)
+
+
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 10_000), objective=st.sampled_from(OBJECTIVES))
+def test_large_graphs_share_the_modes_type_probabilities(seed: int, objective: str) -> None:
+    """Above SHARED_TYPES_MIN_CONFLICTS the draws keep their own bids but share draw 0's
+    (the mode's) following probabilities, decoded once: the same assignments as decoding
+    those probabilities for every draw, all valid."""
+    problem, cliques = _problem(stitched_problem(seed, 12, 3.0))
+    decoder = Decoder(problem, cliques)
+    torch.manual_seed(seed)
+    model, graph = GnnVae(TINY).eval(), graph_tensors(problem, cliques)
+    bids, probs = propose(model, graph, 8, seed=seed)  # (8, V), (8, M): below the threshold
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(infer, "SHARED_TYPES_MIN_CONFLICTS", 0)
+        shared_bids, shared = propose(model, graph, 8, seed=seed)  # (8, V), (1, M)
+        best = sample_best(model, graph, decoder, Evaluator(problem), objective, 8, seed)
+    assert shared.shape == (1, problem.n_conflicts)
+    assert np.array_equal(bids, shared_bids)
+    assert np.allclose(probs[:1], shared, rtol=1e-6, atol=1e-9)
+    once = decode_candidates(decoder, bids, shared, objective)
+    each = decode_candidates(decoder, bids, np.repeat(shared, 8, axis=0), objective)
+    assert np.array_equal(once.a_first, each.a_first)
+    assert np.array_equal(once.following, each.following)
+    assert (
+        check(problem, cliques, once).ok.all() and check(problem, cliques, best.assignment).ok.all()
+    )
 
 
 def test_some_conflicts_go_unscored_on_a_dense_graph() -> None:
