@@ -139,12 +139,11 @@ def propose_chunks(
     shared = _probabilities(model, h, conf, z[:1], scored, n_conf) if shares_types(n_conf) else None
     lo, n = 0, rows if first is None else max(1, min(first, rows))
     while lo < samples:
+        bids = model.sample_bids(h, z[lo : lo + n]) * noise[lo : lo + n].exp()  # (n, V)
         if shared is None:
-            bids, logits = model.sample_heads(h, conf, z[lo : lo + n])  # (n, V), (n, M')
-            probs = _probabilities(model, h, conf, z[lo : lo + n], scored, n_conf, logits)
+            probs = _probabilities(model, h, conf, z[lo : lo + n], scored, n_conf)  # (n, M)
         else:
-            bids, probs = model.sample_bids(h, z[lo : lo + n]), shared  # (n, V), (1, M)
-        bids = bids * noise[lo : lo + n].exp()
+            probs = shared  # (1, M)
         lo += n
         asked = yield bids.double().numpy(), probs
         n = rows if asked is None else max(1, min(int(asked), rows))
@@ -157,13 +156,10 @@ def _probabilities(
     z: torch.Tensor,  # (n, Z)
     scored: np.ndarray,  # (M',)
     n_conf: int,
-    logits: torch.Tensor | None = None,  # (n, M'), if the heads already gave them
 ) -> np.ndarray:  # (n, M) float64, 0 where not scored
     """Following-type probabilities of n latents, laid out over all M conflicts."""
-    if logits is None:
-        logits = model.edge_head(model.pair_features(h, conf), z, per_sample=True)
     probs = np.zeros((len(z), n_conf))
-    probs[:, scored] = torch.sigmoid(logits).double().numpy()
+    probs[:, scored] = torch.sigmoid(model.sample_logits(h, conf, z)).double().numpy()
     return probs
 
 

@@ -153,6 +153,13 @@ class GnnVae(nn.Module):
         """Bids for S latent samples of one graph. Shapes: h (V, H), z (S, Z) -> (S, V) > 0."""
         return F.softplus(self.bid_head(h, z, per_sample=True)) + MIN_BID
 
+    def sample_logits(self, h: torch.Tensor, conf: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
+        """Following-type logits for S latent samples of one graph.
+
+        Shapes: h (V, H), conf (2, M), z (S, Z) -> (S, M).
+        """
+        return self.edge_head(self.pair_features(h, conf), z, per_sample=True)
+
     def sample_heads(
         self, h: torch.Tensor, conf: torch.Tensor, z: torch.Tensor
     ) -> tuple[torch.Tensor, torch.Tensor]:
@@ -160,9 +167,7 @@ class GnnVae(nn.Module):
 
         Shapes: h (V, H), conf (2, M), z (S, Z) -> bids (S, V) > 0, logits (S, M).
         """
-        bids = self.sample_bids(h, z)
-        logits = self.edge_head(self.pair_features(h, conf), z, per_sample=True)
-        return bids, logits
+        return self.sample_bids(h, z), self.sample_logits(h, conf, z)
 
     def train_heads(
         self, h: torch.Tensor, conf: torch.Tensor, z_graph: torch.Tensor, batch: torch.Tensor

@@ -192,7 +192,9 @@ def shifted_flips(
     start, flipped = flips.flips(repaired, ranks, best.a_first[0])  # (D+1,), (K,)
     counts = np.diff(start)  # (D,)
     moved = np.flatnonzero(counts)[:limit]  # (C,)
-    taken = np.repeat(np.isin(np.arange(robot.size), moved), counts)  # (K,)
+    is_moved = np.zeros(robot.size, dtype=bool)  # (D,)
+    is_moved[moved] = True
+    taken = np.repeat(is_moved, counts)  # (K,)
     kept_start = np.concatenate([[0], np.cumsum(counts[moved])])  # (C+1,)
     return moved, kept_start, flipped[taken], repaired[moved]
 
