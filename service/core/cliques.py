@@ -117,7 +117,7 @@ class Cliques:
     def forbidden(self) -> np.ndarray:
         """(M,) bool: conflicts inside a zero-budget clique, which must be exclusive."""
         mask = np.zeros(self.n_conflicts, dtype=bool)
-        mask[self.edge[self.budget[self.clique_of_incidence] <= 0]] = True
+        mask[self.edge[np.repeat(self.budget <= 0, self.size)]] = True
         return mask
 
     def binding(self) -> np.ndarray:
@@ -155,47 +155,117 @@ def find_cliques(problem: Problem) -> Cliques:
     Raises:
         TooManyCliques: the cliques exceed the budget of :func:`clique_budget`.
     """
-    groups = _conflict_cliques(problem, _BOUND.get())
-    density = problem.node_density
-    budgets = [budget_for(int(density[m].min())) for m in groups]
-    groups += [lim.nodes.tolist() for lim in problem.density_limits]
-    budgets += [budget_for(lim.max_robots) for lim in problem.density_limits]
-    edge, start = _incidences(problem, groups)
+    adjacency = _adjacency(problem)
+    members, member_start = _conflict_cliques(adjacency, _BOUND.get())
+    first = member_start[:-1]  # (Q,) every clique has two or more members
+    rho = np.minimum.reduceat(problem.node_density[members], first) if first.size else first
+    limits = problem.density_limits
+    extra = np.cumsum([lim.nodes.size for lim in limits], dtype=np.int64)  # (L,)
+    members = np.concatenate([members, *(lim.nodes for lim in limits)])
+    member_start = np.concatenate([member_start, member_start[-1] + extra])
+    budgets = np.concatenate([budget_for(rho), [budget_for(lim.max_robots) for lim in limits]])
+    edge, start = _incidences(adjacency, members, member_start)
     return Cliques(
-        budget=np.array(budgets, dtype=np.int64),
+        budget=budgets.astype(np.int64),
         edge=edge,
         start=start,
         n_conflicts=problem.n_conflicts,
     )
 
 
-def _conflict_cliques(problem: Problem, bound: CliqueBound) -> list[list[int]]:
-    """Every maximal clique of the conflict graph: node lists, each sorted, in sorted order.
+@dataclass(frozen=True, eq=False)
+class _Adjacency:
+    """The conflict graph in CSR layout: node v's neighbours are ``neighbours[start[v]:
+    start[v + 1]]``, ascending, joined to v by the conflicts at the same positions.
+
+    Shapes: start (V+1,), neighbours (2M,), conflict (2M,).
+    """
+
+    start: np.ndarray
+    neighbours: np.ndarray
+    conflict: np.ndarray
+
+
+def _adjacency(problem: Problem) -> _Adjacency:
+    n, m = problem.node_robot.size, problem.n_conflicts
+    a = np.concatenate([problem.conf_a, problem.conf_b])  # (2M,) both directions
+    b = np.concatenate([problem.conf_b, problem.conf_a])
+    order = np.lexsort((b, a))
+    start = np.searchsorted(a[order], np.arange(n + 1))  # (V+1,)
+    conflict = np.concatenate([np.arange(m), np.arange(m)])[order]
+    return _Adjacency(start.astype(np.int64), b[order].astype(np.int64), conflict)
+
+
+def _conflict_cliques(adjacency: _Adjacency, bound: CliqueBound) -> tuple[np.ndarray, np.ndarray]:
+    """Every maximal clique of the conflict graph, members ascending, cliques in
+    lexicographic order of their members (whatever the enumeration's order).
+
+    Shapes: -> members (K,) int, member_start (Q+1,) int: clique q is
+    ``members[member_start[q]:member_start[q + 1]]``.
 
     Raises:
         TooManyCliques: there are more than ``bound.cliques`` or they hold more than
             ``bound.incidences`` conflicts in all.
     """
-    n = problem.node_robot.size
-    a = np.concatenate([problem.conf_a, problem.conf_b])  # (2M,) both directions
-    b = np.concatenate([problem.conf_b, problem.conf_a])
-    order = np.lexsort((b, a))
-    neighbours = b[order]  # (2M,) sorted within each node
-    start = np.searchsorted(a[order], np.arange(n + 1))  # (V+1,)
     limits = np.array(
         [-1 if b is None else b for b in (bound.incidences, bound.cliques)], dtype=np.int64
     )
-    flat, ends, status = _maximal_cliques(start, neighbours, limits)
+    flat, ends, status = _maximal_cliques(adjacency.start, adjacency.neighbours, limits)
     if status == _OVER_INCIDENCES:
         assert bound.incidences is not None
         raise TooManyCliques("max_clique_incidences", bound.incidences)
     if status == _OVER_CLIQUES:
         assert bound.cliques is not None
         raise TooManyCliques("max_cliques", bound.cliques)
-    bounds = np.concatenate([[0], ends]).tolist()
-    groups = [sorted(flat[lo:hi].tolist()) for lo, hi in zip(bounds[:-1], bounds[1:], strict=True)]
-    groups.sort()
-    return groups
+    bounds = np.concatenate([[0], ends]).astype(np.int64)  # (Q+1,)
+    _sort_segments(flat, bounds)
+    order = _lexicographic_order(flat, bounds)  # (Q,)
+    sizes = np.diff(bounds)[order]  # (Q,)
+    member_start = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+    shift = np.repeat(bounds[:-1][order] - member_start[:-1], sizes)  # (K,)
+    return flat[np.arange(flat.size) + shift], member_start
+
+
+@numba.njit(cache=True, nogil=True)
+def _sort_segments(values: np.ndarray, bounds: np.ndarray) -> None:
+    """Sort ``values[bounds[i]:bounds[i + 1]]`` for every i, in place."""
+    for i in range(bounds.size - 1):
+        values[bounds[i] : bounds[i + 1]].sort()
+
+
+@numba.njit(cache=True, nogil=True)
+def _lexicographic_order(values: np.ndarray, bounds: np.ndarray) -> np.ndarray:
+    """(Q,) the segments ``values[bounds[q]:bounds[q + 1]]`` in lexicographic order (a
+    prefix first), by a bottom-up merge sort: the order Python gives lists of them, without
+    building millions of Python ints (0.26 s for a 250-robot warehouse's cliques)."""
+    n = bounds.size - 1
+    order, spare = np.arange(n), np.empty(n, dtype=np.int64)
+    width = 1
+    while width < n:
+        for lo in range(0, n, 2 * width):
+            mid, hi = min(lo + width, n), min(lo + 2 * width, n)
+            i, j = lo, mid
+            for k in range(lo, hi):
+                if j >= hi or (i < mid and not _precedes(values, bounds, order[j], order[i])):
+                    spare[k] = order[i]
+                    i += 1
+                else:
+                    spare[k] = order[j]
+                    j += 1
+        order, spare = spare, order
+        width *= 2
+    return order
+
+
+@numba.njit(cache=True, nogil=True)
+def _precedes(values: np.ndarray, bounds: np.ndarray, p: int, q: int) -> bool:
+    """Whether segment p comes strictly before segment q in lexicographic order."""
+    lp, lq = bounds[p + 1] - bounds[p], bounds[q + 1] - bounds[q]
+    for k in range(min(lp, lq)):
+        a, b = values[bounds[p] + k], values[bounds[q] + k]
+        if a != b:
+            return a < b
+    return lp < lq
 
 
 @numba.njit(cache=True, nogil=True)
@@ -424,22 +494,53 @@ def _degeneracy_rank(start: np.ndarray, neighbours: np.ndarray) -> np.ndarray:
     return rank
 
 
-def _incidences(problem: Problem, groups: list[list[int]]) -> tuple[np.ndarray, np.ndarray]:
-    """The conflicts inside each clique of ``groups`` (node lists), in CSR layout.
+def _incidences(
+    adjacency: _Adjacency, members: np.ndarray, member_start: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The conflicts inside each clique (members ascending and pairwise in conflict;
+    clique q is ``members[member_start[q]:member_start[q + 1]]``), in CSR layout.
 
-    Vectorized per clique size: every node pair of a clique is a conflict, looked up
-    by :meth:`Problem.conflict_between`.
+    Compiled: each pair's conflict is found in its first node's sorted neighbours (a
+    vectorized lookup in a table of every conflict took 0.9 s for the 14 million
+    incidences of a 250-robot warehouse).
 
     Shapes: -> edge (E,) int sorted within each clique, start (Q+1,) int.
     """
-    sizes = np.array([len(m) for m in groups], dtype=np.int64)
+    sizes = np.diff(member_start)  # (Q,)
     start = np.concatenate([[0], np.cumsum(sizes * (sizes - 1) // 2)]).astype(np.int64)
-    edge = np.empty(start[-1], dtype=np.int64)
-    for size in np.unique(sizes).tolist():
-        which = np.flatnonzero(sizes == size)
-        members = np.array([groups[q] for q in which], dtype=np.int64)  # (Q_s, size)
-        i, j = np.triu_indices(size, 1)
-        inside = problem.conflict_between(members[:, i], members[:, j])  # (Q_s, pairs)
-        inside = np.sort(inside, axis=1)
-        edge[start[which][:, None] + np.arange(i.size)] = inside
+    edge = _pair_conflicts(
+        members.astype(np.int64),
+        member_start,
+        start,
+        adjacency.start,
+        adjacency.neighbours,
+        adjacency.conflict,
+    )
     return edge, start
+
+
+@numba.njit(cache=True, nogil=True)
+def _pair_conflicts(
+    members: np.ndarray,
+    member_start: np.ndarray,
+    start: np.ndarray,
+    adj_start: np.ndarray,
+    neighbours: np.ndarray,
+    conflict: np.ndarray,
+) -> np.ndarray:
+    """(E,) the conflict of every member pair of every clique, sorted within each clique.
+    Members are ascending, so each node's later partners are found by one forward walk
+    through its ascending neighbours."""
+    edge = np.empty(start[-1], dtype=np.int64)
+    for q in range(member_start.size - 1):
+        lo, hi, k = member_start[q], member_start[q + 1], start[q]
+        for i in range(lo, hi):
+            pos, end = adj_start[members[i]], adj_start[members[i] + 1]
+            for j in range(i + 1, hi):
+                while pos < end and neighbours[pos] < members[j]:
+                    pos += 1
+                found = pos < end and neighbours[pos] == members[j]
+                edge[k] = conflict[pos] if found else -1  # -1: not a pair in conflict
+                k += 1
+    _sort_segments(edge, start)
+    return edge

@@ -225,14 +225,12 @@ class Decoder:
         """
         cl = self.cliques
         binding = cl.binding()  # (Q,)
-        inc_clique = cl.clique_of_incidence  # (E,)
-        keep = binding[inc_clique]
-        edges, cliques = cl.edge[keep], inc_clique[keep]
-        order = np.lexsort((cliques, edges))
-        edges, cliques = edges[order], cliques[order]
-        self._bound_edges, first = np.unique(edges, return_index=True)  # (B,)
-        self._bound_start = np.append(first, edges.size).astype(np.int64)  # (B+1,)
-        self._bound_cliques = cliques.astype(np.int64)  # (E',) conflict b's: start[b]:start[b+1]
+        keep = np.repeat(binding, cl.size)  # (E,) incidences of binding cliques
+        inc_clique = np.repeat(np.flatnonzero(binding), cl.size[binding])  # (E',) ascending
+        start, cliques = csr(cl.edge[keep], inc_clique, cl.n_conflicts)  # (M+1,), (E',)
+        self._bound_edges = np.flatnonzero(np.diff(start))  # (B,)
+        self._bound_start = np.append(start[self._bound_edges], start[-1])  # (B+1,)
+        self._bound_cliques = cliques  # (E',) conflict b's: start[b]:start[b+1], ascending
 
     def ranks(self, bids: np.ndarray) -> np.ndarray:
         """Chain sums of bids. Shapes: bids (S, V) positive -> ranks (S, V)."""

@@ -15,11 +15,13 @@ from service.core.cliques import (
     CliqueBound,
     Cliques,
     TooManyCliques,
+    _lexicographic_order,
     _maximal_cliques,
     budget_for,
     clique_budget,
     find_cliques,
 )
+from service.core.orientation import csr
 from service.core.problem import Problem, problem_from_request
 from service.core.schemas import ScheduleRequest
 from service.learning.generate import small_problem
@@ -172,6 +174,36 @@ def test_the_bounds_stop_exactly_above_the_cliques_pairs_and_count(
     if cliques:
         assert status(pairs - 1, -1) == OVER_INCIDENCES
         assert status(-1, len(cliques) - 1) == OVER_CLIQUES
+
+
+@settings(max_examples=100, deadline=None, derandomize=True)
+@given(segments=st.lists(st.lists(st.integers(0, 4), max_size=5), max_size=60))
+def test_segments_are_ordered_as_python_orders_lists(segments: list[list[int]]) -> None:
+    values = np.array([v for seg in segments for v in seg], dtype=np.int64)
+    bounds = np.cumsum([0, *map(len, segments)]).astype(np.int64)
+    order = _lexicographic_order(values, bounds)
+    assert order.tolist() == sorted(range(len(segments)), key=lambda q: segments[q])
+
+
+def test_find_cliques_lists_cliques_and_their_conflicts_in_canonical_order() -> None:
+    problem = _problem(small_problem(3))
+    cl = find_cliques(problem)
+    inside = [cl.edge[lo:hi] for lo, hi in zip(cl.start[:-1], cl.start[1:], strict=True)]
+    groups = [
+        sorted(set(problem.conf_a[q].tolist()) | set(problem.conf_b[q].tolist())) for q in inside
+    ]
+    assert not problem.density_limits and len(groups) > 3 and groups == sorted(groups)
+    assert all(np.all(np.diff(q) > 0) for q in inside)
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(keys=st.lists(st.integers(0, 6), max_size=80))
+def test_csr_groups_values_by_key_stably(keys: list[int]) -> None:
+    key = np.array(keys, dtype=np.int64)
+    start, grouped = csr(key, np.arange(key.size) * 10, 7)
+    counts = np.bincount(key, minlength=7)
+    assert start.tolist() == np.concatenate([[0], np.cumsum(counts)]).tolist()
+    assert grouped.tolist() == (np.argsort(key, kind="stable") * 10).tolist()
 
 
 def test_find_cliques_names_the_bound_it_exceeds() -> None:
