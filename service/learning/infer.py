@@ -20,6 +20,7 @@ from service.core.evaluate import Evaluator
 from service.core.problem import Problem
 from service.core.schemas import Objective
 from service.learning.features import GraphTensors
+from service.learning.fused_gat import TargetArcs
 from service.learning.model import GnnVae
 
 __all__ = [
@@ -132,7 +133,8 @@ def propose_chunks(
     ladder = torch.linspace(0.0, 1.0, samples)[:, None] if samples > 1 else torch.zeros(1, 1)
     z = torch.randn(samples, model.config.latent, generator=gen) * ladder  # (S, Z)
     noise = torch.randn(samples, graph.x.shape[0], generator=gen) * (BID_NOISE * ladder)  # (S, V)
-    h = model.embed(graph.x, graph.edge_index, graph.edge_attr)  # (V, H)
+    arcs = TargetArcs.of(graph.edge_index, graph.edge_attr, graph.x.shape[0])
+    h = model.embed_fused(graph.x, arcs)  # (V, H)
     n_conf = graph.conf.shape[0]
     scored = np.arange(n_conf) if scored is None else scored  # (M',)
     conf = graph.conf[torch.from_numpy(scored)].T.contiguous()  # (2, M')

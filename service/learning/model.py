@@ -19,6 +19,7 @@ from torch.nn import functional as F
 from torch_geometric.nn import GATv2Conv, global_max_pool
 
 from service.learning.features import EDGE_DIM, NODE_DIM
+from service.learning.fused_gat import TargetArcs, fused_gatv2
 
 __all__ = ["GnnVae", "GnnVaeConfig", "LatentHead", "chain_ranks"]
 
@@ -71,6 +72,17 @@ class GatStack(nn.Module):
         h = F.relu(self.inp(x[:, : self.features]))
         for conv, norm in zip(self.convs, self.norms, strict=True):
             h = norm(h + F.relu(conv(h, edge_index, edge_attr)))
+        return h
+
+    def infer(self, x: torch.Tensor, arcs: TargetArcs) -> torch.Tensor:
+        """:meth:`forward` in eval mode, each layer by the fused kernel
+        (:func:`~service.learning.fused_gat.fused_gatv2`: 3-4x faster on large graphs).
+
+        Shapes: x (V, NODE_DIM), arcs of the same graph -> (V, hidden).
+        """
+        h = F.relu(self.inp(x[:, : self.features]))
+        for conv, norm in zip(self.convs, self.norms, strict=True):
+            h = norm(h + F.relu(fused_gatv2(conv, h, arcs)))
         return h
 
     def __repr__(self) -> str:
@@ -142,6 +154,13 @@ class GnnVae(nn.Module):
     ) -> torch.Tensor:
         """Skeleton-graph node embeddings. Shapes: -> (V, H)."""
         return self.trunk(x, edge_index, edge_attr)
+
+    def embed_fused(self, x: torch.Tensor, arcs: TargetArcs) -> torch.Tensor:
+        """:meth:`embed` for serving (eval mode, no gradient), by the fused kernel.
+
+        Shapes: x (V, NODE_DIM) -> (V, H).
+        """
+        return self.trunk.infer(x, arcs)
 
     @staticmethod
     def pair_features(h: torch.Tensor, conf: torch.Tensor) -> torch.Tensor:
