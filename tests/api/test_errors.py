@@ -103,6 +103,10 @@ INVALID: dict[str, tuple[Edit, str]] = {
         put("density_limits", [{"nodes": ["r1/a", "ghost"], "max_robots": 1}]),
         "density_limits.0.nodes: unknown node id 'ghost'",
     ),
+    "density limit node twice": (
+        put("density_limits", [{"nodes": ["r1/a", "r2/a", "r1/a"], "max_robots": 1}]),
+        "density_limits.0.nodes: a node is listed twice",
+    ),
     # field by field (pydantic)
     "time NaN": (put(*NODE, "enter", math.nan), f"{NODE_LOC}.enter: Input should be a finite"),
     "time Infinity": (put(*NODE, "exit", math.inf), f"{NODE_LOC}.exit: Input should be a finite"),

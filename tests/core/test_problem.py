@@ -194,6 +194,28 @@ def test_valid_clique_density_limit_is_kept() -> None:
     assert p.density_limits[0].max_robots == 1
 
 
+def test_faulty_density_limits_are_reported_in_order_and_the_others_kept() -> None:
+    req = copy.deepcopy(EXAMPLE)
+    req["density_limits"] = [
+        {"nodes": ["m0", "n1"], "max_robots": 1},
+        {"nodes": ["n0", "zz", "yy"], "max_robots": 2},
+        {"nodes": ["m0", "n0"], "max_robots": 2},
+        {"nodes": ["n1", "n1"], "max_robots": 1},
+        {"nodes": ["n0", "n1"], "max_robots": 1},  # same robot: not in conflict
+    ]
+    with pytest.raises(ProblemError) as info:
+        _build(req)
+    assert [(e.loc[2], e.msg) for e in info.value.errors] == [
+        (1, "unknown node id 'zz'"),
+        (1, "unknown node id 'yy'"),
+        (3, "a node is listed twice"),
+        (4, "nodes are not a clique of the conflict graph: no conflict between 'n0' and 'n1'"),
+    ]
+    del req["density_limits"][1:2], req["density_limits"][2:]
+    kept = _build(req).density_limits
+    assert [(lim.nodes.tolist(), lim.max_robots) for lim in kept] == [([1, 2], 1), ([0, 2], 2)]
+
+
 def test_times_are_exact_keys() -> None:
     # Times differing in the last bit stay distinct time points; equal ones merge.
     t = 1.0 + np.finfo(float).eps
