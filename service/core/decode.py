@@ -36,7 +36,7 @@ import numpy as np
 
 from service.core.assignment import Assignments
 from service.core.cliques import Cliques
-from service.core.orientation import csr
+from service.core.csr import csr
 from service.core.problem import Problem
 from service.core.schemas import Objective
 

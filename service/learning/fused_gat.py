@@ -21,7 +21,7 @@ import numpy as np
 import torch
 from torch_geometric.nn import GATv2Conv
 
-from service.core.orientation import csr
+from service.core.csr import csr
 
 __all__ = ["TargetArcs", "fused_gatv2"]
 

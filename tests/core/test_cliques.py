@@ -21,7 +21,7 @@ from service.core.cliques import (
     clique_budget,
     find_cliques,
 )
-from service.core.orientation import csr
+from service.core.csr import csr
 from service.core.problem import Problem, problem_from_request
 from service.core.schemas import ScheduleRequest
 from service.learning.generate import small_problem
