@@ -83,6 +83,8 @@ def tabu_search(
     candidate lists come from ``seed`` (default: the request's).
     """
     deadline = time.perf_counter() + (ctx.time_limit_s if budget_s is None else budget_s)
+    if time.perf_counter() >= deadline:  # no time: not even the orientation graph is built
+        return start, float(ctx.evaluator.evaluate(start).costs[ctx.objective][0]), 0
     rng = np.random.default_rng(ctx.seed if seed is None else seed)
     graph = ctx.orientation
     evaluate = ctx.evaluator.evaluate

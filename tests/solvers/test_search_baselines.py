@@ -182,3 +182,11 @@ def test_bbts_when_the_tree_ends_exactly_at_a_batch_boundary(
     out = bbts(ctx)
     assert out.samples == leaves
     assert check(ctx.problem, ctx.cliques, out.assignment).ok.tolist() == [True]
+
+
+def test_tabu_search_without_time_builds_nothing_and_returns_its_start() -> None:
+    ctx = context(stitched_problem(5, 30, 3.0), "avg_completion", 1.0)
+    start = fcfs(ctx)
+    found, found_cost, iterations = tabu_search(ctx, start.assignment, budget_s=0.0)
+    assert found is start.assignment and iterations == 0 and "orientation" not in ctx.__dict__
+    assert found_cost == cost(ctx, start)
