@@ -188,6 +188,7 @@ class _Adjacency:
 
 
 def _adjacency(problem: Problem) -> _Adjacency:
+    """The problem's conflict graph, both directions of every conflict."""
     n, m = problem.node_robot.size, problem.n_conflicts
     a = np.concatenate([problem.conf_a, problem.conf_b])  # (2M,) both directions
     b = np.concatenate([problem.conf_b, problem.conf_a])
@@ -515,46 +516,24 @@ def _incidences(
     n_nodes = adjacency.start.size - 1
     occ_start, occurrence = csr(members, np.arange(members.size), n_nodes)  # node -> slots
     edge = _pair_conflicts(
-        members,
-        np.repeat(np.arange(sizes.size), sizes),
-        member_start,
-        start,
-        occ_start,
-        occurrence,
-        adjacency,
-    )
+        members, np.repeat(np.arange(sizes.size), sizes), member_start, start, occ_start,
+        occurrence, adjacency.start, adjacency.neighbours, adjacency.conflict,
+    )  # fmt: skip
+    _sort_segments(edge, start)
     return edge, start
 
 
+@numba.njit(cache=True, nogil=True)
 def _pair_conflicts(
-    members: np.ndarray,  # (K,) int
+    members: np.ndarray,  # (K,) int, every clique's members
     owner: np.ndarray,  # (K,) int, the clique of each member slot
     member_start: np.ndarray,  # (Q+1,) int
-    start: np.ndarray,  # (Q+1,) int, pair offsets
+    start: np.ndarray,  # (Q+1,) int, each clique's first pair
     occ_start: np.ndarray,  # (V+1,) int, CSR of each node's member slots
     occurrence: np.ndarray,  # (K,) int, member slots by node
-    adjacency: _Adjacency,
-) -> np.ndarray:
-    """(E,) the conflict of every member pair of every clique, sorted within each clique."""
-    edge = _pair_kernel(
-        members, owner, member_start, start, occ_start, occurrence,
-        adjacency.start, adjacency.neighbours, adjacency.conflict,
-    )  # fmt: skip
-    _sort_segments(edge, start)
-    return edge
-
-
-@numba.njit(cache=True, nogil=True)
-def _pair_kernel(
-    members: np.ndarray,
-    owner: np.ndarray,
-    member_start: np.ndarray,
-    start: np.ndarray,
-    occ_start: np.ndarray,
-    occurrence: np.ndarray,
-    adj_start: np.ndarray,
-    neighbours: np.ndarray,
-    conflict: np.ndarray,
+    adj_start: np.ndarray,  # (V+1,) int, the conflict graph (:class:`_Adjacency`)
+    neighbours: np.ndarray,  # (2M,) int
+    conflict: np.ndarray,  # (2M,) int
 ) -> np.ndarray:
     """(E,) the conflict of every member pair, in each clique's pair order ((0, 1), (0, 2),
     ..., (1, 2), ...); -1 where two members are not in conflict."""
