@@ -54,6 +54,7 @@ from bench.cases import (
     cell,
     conformance_cases,
     measured,
+    request_key,
     run_cli,
     service_policy,
     solve_case,
@@ -62,11 +63,13 @@ from bench.cases import (
 )
 from bench.report import (
     MODEL_STORE,
+    JsonCache,
     add_run_args,
     jsonable,
     machine_info,
     nanmean,
     plot_lines,
+    reference_cache,
     write_results,
 )
 from service.memory import settle
@@ -86,6 +89,8 @@ METHODS: dict[str, tuple[str, str, int]] = {
     "exact": ("exact", "gnn_vae_refined", 1),
 }
 TARGET_METHOD = "auto"  # the one method also run at the target budget
+# The yardstick of generated worlds: both cores for Config.reference_budget seconds.
+REFERENCE_METHOD = "auto_2cores"
 PORTFOLIOS = ("auto", "auto_2cores")  # the methods held to issue 11's targets
 EARLY = 0.5  # a run ending before this share of its budget stopped on its own
 # A run longer than OVERRUN x its budget + OVERRUN_S is listed as an overrun.
@@ -111,6 +116,11 @@ class Config:
     per_world: int = 1
     objective: str = "avg_completion"
     base_seed: int = 0
+    # Seconds of REFERENCE_METHOD per generated world (None: none), run once and cached:
+    # its answer joins the yardstick, so that the ratios are not against the methods' own
+    # best (20 s of priority search beat every method's 10-s best on 4 of 6 worlds of 250
+    # robots by 1.5-7 %, session 16).
+    reference_budget: float | None = 30.0
     store: Path = MODEL_STORE
     out: Path = Path("docs/results/anytime")
     cache: Path = Path("bench/cache")
@@ -119,6 +129,7 @@ class Config:
 QUICK = Config(
     budgets=(0.1, 0.3),
     target_budget=None,
+    reference_budget=None,
     sets=("wh_25", "geo_10"),
     per_set=1,
     worlds=("wh_two_lane:10", "floor_dense:10"),
@@ -198,18 +209,32 @@ def warm_up(cfg: Config, cases: Sequence[Case], policy: DispatchPolicy) -> None:
                 run_method(method, case, 0.3, cfg, policy)
 
 
+def reference_rows(
+    case: Case, cfg: Config, policy: DispatchPolicy, cache: JsonCache
+) -> list[dict[str, Any]]:
+    """REFERENCE_METHOD's run of ``cfg.reference_budget`` on a generated world (cached by
+    request), or none (a conformance problem has its proven optimum)."""
+    budget = cfg.reference_budget
+    if budget is None or case.ref_cost is not None:
+        return []
+    key = request_key(case, cfg.objective, budget)
+    return cache.get(key, lambda: [run_method(REFERENCE_METHOD, case, budget, cfg, policy)])
+
+
 def run(cfg: Config, progress: bool = True) -> dict[str, Any]:
     """Every method at every budget on every problem; return everything that gets written."""
     cases = cases_of(cfg)
     policy = service_policy(cfg.store)
     warm_up(cfg, cases, policy)
     settle()  # the service's collector policy once warm: the cases held escape full collections
+    cache = reference_cache(cfg.cache, "anytime-ref")
     rows: list[dict[str, Any]] = []
     for case in tqdm(cases, desc="anytime", unit="problem", disable=not progress):
+        refs = reference_rows(case, cfg, policy, cache)
         found = [
             r for m in cfg.methods for r in run_budgets(m, case, budgets_of(m, cfg), cfg, policy)
         ]
-        rows += measured(case, found)
+        rows += measured(case, [*refs, *found])[len(refs) :]
     return {"machine": machine_info(), "config": jsonable(asdict(cfg)), "rows": rows}
 
 
@@ -312,12 +337,14 @@ def report(results: dict[str, Any], out: Path) -> str:
     rows, m = results["rows"], results["machine"]
     summary = summarize(rows, ("family", "method", "budget_s"))
     problems = len({r["name"] for r in rows})
+    ref_s = results["config"].get("reference_budget")
+    yardstick = "" if ref_s is None else f" and `{REFERENCE_METHOD}` with {ref_s:g} s (cached)"
     text = "\n\n".join(
         [
             f"Run {m['date']} on {m['cpu']} ({m['cpus']} CPUs), commit {m['commit']}; "
             f"{problems} problems, seed {results['config']['base_seed']}. Conformance sets: "
             "ratios against the proven optimum; generated worlds (`kind robots`): against the "
-            "best cost any method found at any budget.",
+            f"best cost any method found at any budget{yardstick}.",
             "Cells: mean cost ratio / mean delay ratio / share proven optimal.",
             curve_table(summary),
             *(
@@ -343,6 +370,11 @@ def _parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     p.add_argument("--methods", nargs="+", choices=tuple(METHODS))
     p.add_argument("--budgets", type=float, nargs="+", help="seconds per solve")
     p.add_argument("--target-budget", type=float, help=f"also run {TARGET_METHOD} at this budget")
+    p.add_argument(
+        "--reference-budget",
+        type=float,
+        help=f"seconds of {REFERENCE_METHOD} per generated world for the yardstick (cached)",
+    )
     add_case_args(p)
     add_run_args(p)
     return p.parse_args(argv)

@@ -13,6 +13,7 @@ raw runs into ratios; :func:`summarize` and :func:`cell` make the tables.
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import sys
 import time
@@ -194,6 +195,13 @@ def measured(case: Case, rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]
         }
         for r in rows
     ]
+
+
+def request_key(case: Case, objective: str, budget_s: float) -> str:
+    """A reference cache's key: the request's SHA-256 (options aside), objective, budget."""
+    body = case.request.model_dump(mode="json", by_alias=True, exclude={"options"})
+    digest = hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()[:20]
+    return f"{digest}-{objective}-{budget_s:g}s"
 
 
 def with_options(request: ScheduleRequest, options: dict[str, Any]) -> ScheduleRequest:

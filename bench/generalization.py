@@ -40,8 +40,6 @@ time. Under ``--out`` it writes:
 from __future__ import annotations
 
 import argparse
-import hashlib
-import json
 import os
 import time
 from collections.abc import Sequence
@@ -57,6 +55,7 @@ from bench.cases import (
     WORLD_TRIES,
     Case,
     measured,
+    request_key,
     run_cli,
     service_policy,
     solve_case,
@@ -204,13 +203,6 @@ def methods_of(models: Sequence[str | None]) -> list[tuple[str, str, str | None]
     return out
 
 
-def request_key(case: Case, cfg: Config) -> str:
-    """The reference cache's key: the request's SHA-256 (options aside), objective, budget."""
-    body = case.request.model_dump(mode="json", by_alias=True, exclude={"options"})
-    digest = hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()[:20]
-    return f"{digest}-{cfg.objective}-{cfg.ref_budget_s:g}s"
-
-
 def reference_runs(case: Case, cfg: Config, policy: DispatchPolicy) -> list[dict[str, Any]]:
     """``auto`` and ``tabu`` with the reference budget each: cost, proof, who answered, time."""
     runs = []
@@ -298,7 +290,10 @@ def run(cfg: Config, progress: bool = True) -> dict[str, Any]:
     methods = methods_of(list(by_model))
     cache = reference_cache(cfg.cache, "generalization-ref")
     refs = [
-        cache.get(request_key(w.case, cfg), lambda w=w: reference_runs(w.case, cfg, by_model[None]))
+        cache.get(
+            request_key(w.case, cfg.objective, cfg.ref_budget_s),
+            lambda w=w: reference_runs(w.case, cfg, by_model[None]),
+        )
         for w in tqdm(worlds, desc="references", unit="problem", disable=not progress)
     ]
     smallest = min(worlds, key=lambda w: w.case.problem.n_conflicts)

@@ -15,12 +15,13 @@ from bench.anytime import (
     _parse_args,
     budgets_of,
     main,
+    reference_rows,
     run_budgets,
     target_group,
     target_table,
 )
 from bench.cases import conformance_cases, measured, world_case
-from bench.report import config_from_args
+from bench.report import JsonCache, config_from_args
 
 
 def _raw(method: str, cost: float, budget: float = 1.0, optimal: bool = False) -> dict:
@@ -56,6 +57,29 @@ def test_proven_or_early_answers_stand_for_larger_budgets(monkeypatch) -> None:
     assert rows[-1]["reused"] and rows[-1]["cost"] == rows[-2]["cost"]
     assert budgets_of("auto", Config()) == (0.1, 0.3, 1.0, 3.0, 5.0, 10.0)
     assert budgets_of("tabu", Config()) == Config().budgets
+
+
+def test_a_long_reference_run_joins_the_yardstick_of_generated_worlds_once(
+    monkeypatch, tmp_path: Path
+) -> None:
+    calls = []
+
+    def fake(method, case, budget, cfg, policy):
+        calls.append((method, budget))
+        return _raw(method, 9.0, budget)
+
+    monkeypatch.setattr(anytime, "run_method", fake)
+    (case,) = conformance_cases(("wh_25",), per_set=1)
+    generated = replace(case, ref_cost=None, ref_runtime_s=None)
+    cfg = replace(Config(), reference_budget=30.0)
+    cache = JsonCache(tmp_path / "refs.json")
+    assert reference_rows(case, cfg, None, cache) == []  # a proven optimum needs none
+    refs = reference_rows(generated, cfg, None, cache)
+    assert reference_rows(generated, cfg, None, JsonCache(tmp_path / "refs.json")) == refs
+    assert calls == [(anytime.REFERENCE_METHOD, 30.0)]
+    rows = measured(generated, [*refs, _raw("auto", 10.0)])[len(refs) :]
+    assert [r["method"] for r in rows] == ["auto"] and rows[0]["ref_cost"] == 9.0
+    assert reference_rows(generated, replace(cfg, reference_budget=None), None, cache) == []
 
 
 def test_targets_group_warehouses_and_dense_floors() -> None:
