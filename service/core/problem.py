@@ -426,7 +426,7 @@ def _density_limits(
     In bulk: every limit's nodes are looked up in one pass and checked as one array
     (sorted within each limit), their pairs limits of one size at a time; only limits
     found faulty are walked one by one for their messages. Paths of 250 robots send ~11,600
-    limits (pairs that may not be occupied at once): 75 ms one limit at a time, ~15 ms
+    limits (pairs that may not be occupied at once): 75 ms one limit at a time, ~20 ms
     here. Errors are reported in the order of the limits.
     """
     lims = req.density_limits
