@@ -3,7 +3,7 @@
 PyG's ``GATv2Conv`` materializes about ten (E, heads, channels) tensors per layer (both
 ends' projections gathered per arc, the arc features' projection, their sum, its leaky
 ReLU, the weighted messages): on a 250-robot warehouse (43,670 arcs, 2 heads x 64
-channels, 22 MB each) a layer took 35-60 ms on one thread, mostly memory traffic and
+channels, 22 MB each) a layer took 35-170 ms on one thread, mostly memory traffic and
 fresh pages. Here each node's incoming arcs are walked once, reading only the nodes'
 projections (a few hundred kB) and each arc's raw features: same arithmetic in float32,
 another summation order, so the embeddings equal PyG's to float rounding (tested).
