@@ -11,6 +11,7 @@ between ~10^5 and ~10^3 graph nodes through the GATv2 layers).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
 import torch
@@ -69,10 +70,7 @@ class GatStack(nn.Module):
     def forward(
         self, x: torch.Tensor, edge_index: torch.Tensor, edge_attr: torch.Tensor
     ) -> torch.Tensor:
-        h = F.relu(self.inp(x[:, : self.features]))
-        for conv, norm in zip(self.convs, self.norms, strict=True):
-            h = norm(h + F.relu(conv(h, edge_index, edge_attr)))
-        return h
+        return self._layers(x, lambda conv, h: conv(h, edge_index, edge_attr))
 
     def infer(self, x: torch.Tensor, arcs: TargetArcs) -> torch.Tensor:
         """:meth:`forward` in eval mode, each layer by the fused kernel
@@ -81,9 +79,16 @@ class GatStack(nn.Module):
 
         Shapes: x (V, NODE_DIM), arcs of the same graph -> (V, hidden).
         """
+        return self._layers(x, lambda conv, h: fused_gatv2(conv, h, arcs))
+
+    def _layers(
+        self, x: torch.Tensor, message: Callable[[GATv2Conv, torch.Tensor], torch.Tensor]
+    ) -> torch.Tensor:
+        """Input projection, then each residual layer with ``message(conv, h)`` as its GATv2
+        pass. Shapes: x (V, NODE_DIM) -> (V, hidden)."""
         h = F.relu(self.inp(x[:, : self.features]))
         for conv, norm in zip(self.convs, self.norms, strict=True):
-            h = norm(h + F.relu(fused_gatv2(conv, h, arcs)))
+            h = norm(h + F.relu(message(conv, h)))
         return h
 
     def __repr__(self) -> str:
@@ -179,15 +184,6 @@ class GnnVae(nn.Module):
         Shapes: h (V, H), conf (2, M), z (S, Z) -> (S, M).
         """
         return self.edge_head(self.pair_features(h, conf), z, per_sample=True)
-
-    def sample_heads(
-        self, h: torch.Tensor, conf: torch.Tensor, z: torch.Tensor
-    ) -> tuple[torch.Tensor, torch.Tensor]:
-        """Bids and following-type logits for S latent samples of one graph.
-
-        Shapes: h (V, H), conf (2, M), z (S, Z) -> bids (S, V) > 0, logits (S, M).
-        """
-        return self.sample_bids(h, z), self.sample_logits(h, conf, z)
 
     def train_heads(
         self, h: torch.Tensor, conf: torch.Tensor, z_graph: torch.Tensor, batch: torch.Tensor

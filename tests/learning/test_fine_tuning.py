@@ -51,7 +51,8 @@ def _forward(model: GnnVae, data: Path) -> tuple[torch.Tensor, ...]:
     graph = examples_from_records(iter_problems(data, 1), OBJECTIVE)[0].graph
     with torch.no_grad():
         h = model.embed(graph.x, graph.edge_index, graph.edge_attr)
-        bids, logits = model.sample_heads(h, graph.conf.T, torch.ones(1, TINY.latent))
+        z = torch.ones(1, TINY.latent)
+        bids, logits = model.sample_bids(h, z), model.sample_logits(h, graph.conf.T, z)
     return h, bids, logits
 
 
