@@ -8,6 +8,9 @@ request with that ``options.time_limit_s`` (:data:`METHODS`):
   robot-priority search and tabu search, ``priority_tabu``, with 30 % of the budget
   above the exact threshold, then CP-SAT hinted with the best); also at
   ``--target-budget`` (5 s, the budget of issue 11's second target);
+* ``auto_cp_sat``: the same portfolio without large-neighbourhood search (CP-SAT on
+  the whole model after the first stage at every size below its cap: ``auto`` until
+  session 18);
 * ``auto_tabu``: the same portfolio with tabu search alone as its first stage
   (``large_solver="tabu"``, the default until session 12);
 * ``auto_gnn``: the same portfolio with ``gnn_vae_refined`` as its first stage
@@ -15,7 +18,8 @@ request with that ``options.time_limit_s`` (:data:`METHODS`):
 * ``auto_2cores``: ``auto`` given both cores of the 2-core machine
   (``exact_workers=2``: two CP-SAT workers, the search's batches evaluated in two
   threads), as a service running one solve at a time can be set up;
-* ``gnn_vae_refined`` and ``tabu`` (from FCFS) alone: each stage alone;
+* ``gnn_vae_refined``, ``tabu`` and ``lns`` (from FCFS's best blend) alone: each stage
+  alone;
 * ``exact``: plain CP-SAT hinted with FCFS.
 
 Problems: the conformance sets (optima proven by an independent MILP:
@@ -78,15 +82,18 @@ from service.solvers.dispatch import DispatchPolicy
 __all__ = ["METHODS", "QUICK", "Config", "main", "run"]
 
 # Method name -> (solver, the policy's large solver: the portfolio's first stage, cores of
-# the solve: the policy's exact_workers).
-METHODS: dict[str, tuple[str, str, int]] = {
-    "auto": ("auto", "priority_tabu", 1),
-    "auto_2cores": ("auto", "priority_tabu", 2),
-    "auto_tabu": ("auto", "tabu", 1),
-    "auto_gnn": ("auto", "gnn_vae_refined", 1),
-    "gnn_vae_refined": ("gnn_vae_refined", "gnn_vae_refined", 1),
-    "tabu": ("tabu", "gnn_vae_refined", 1),
-    "exact": ("exact", "gnn_vae_refined", 1),
+# the solve: the policy's exact_workers, the policy's lns_min_conflicts or None: as set).
+NO_LNS = 10**9  # a threshold no problem reaches: the portfolio's CP-SAT stage as before
+METHODS: dict[str, tuple[str, str, int, int | None]] = {
+    "auto": ("auto", "priority_tabu", 1, None),
+    "auto_cp_sat": ("auto", "priority_tabu", 1, NO_LNS),
+    "auto_2cores": ("auto", "priority_tabu", 2, None),
+    "auto_tabu": ("auto", "tabu", 1, NO_LNS),
+    "auto_gnn": ("auto", "gnn_vae_refined", 1, NO_LNS),
+    "gnn_vae_refined": ("gnn_vae_refined", "gnn_vae_refined", 1, NO_LNS),
+    "tabu": ("tabu", "gnn_vae_refined", 1, NO_LNS),
+    "lns": ("lns", "priority_tabu", 1, NO_LNS),
+    "exact": ("exact", "gnn_vae_refined", 1, NO_LNS),
 }
 TARGET_METHOD = "auto"  # the one method also run at the target budget
 # The yardstick of generated worlds: both cores for Config.reference_budget seconds.
@@ -149,8 +156,9 @@ def run_method(
 ) -> dict[str, Any]:
     """One method on one problem through the dispatcher, with ``budget_s`` as time limit
     (``policy``: the service's, with the method's large solver)."""
-    solver, large, cores = METHODS[method]
-    policy = replace(policy, large_solver=large, exact_workers=cores)
+    solver, large, cores, lns_min = METHODS[method]
+    lns_min = policy.lns_min_conflicts if lns_min is None else lns_min
+    policy = replace(policy, large_solver=large, exact_workers=cores, lns_min_conflicts=lns_min)
     options = {"solver": solver, "time_limit_s": budget_s, "seed": cfg.base_seed}
     answer, runtime = solve_case(case, policy, options)
     return {

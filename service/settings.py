@@ -53,6 +53,13 @@ class Settings(BaseSettings):
     # CP-SAT improved no 250-robot warehouse (12,000-23,000 conflicts) in 10 s, and
     # the 70 % it took there made auto worse with 10 s than with 5 s.
     exact_stage_max_conflicts: int = Field(default=10_000, ge=0)
+    # ``auto`` runs large-neighbourhood search (CP-SAT re-planning a few robots at a time,
+    # service/solvers/lns.py) instead of its whole-model CP-SAT stage from this many
+    # conflicts up to exact_stage_max_conflicts, for the objectives that are sums. Measured
+    # (session 18, 5 s, against the better answer): generated 50-robot worlds of 806-901
+    # conflicts 0.81-0.98 -> 1.00, of 515-575 conflicts mixed (two worse by 1-5 %, one
+    # better); 100-robot warehouses, docs/benchmarks.md "Large-neighbourhood search".
+    lns_min_conflicts: int = Field(default=700, ge=0)
     # ``auto``'s first stage above exact_max_conflicts. Measured (2026-11-24, bench.anytime,
     # auto with tabu from the blended start vs with gnn_vae_refined, cost ratio against
     # the best found): generated warehouses and floors of 515-3,900 conflicts 0.88-0.97 vs

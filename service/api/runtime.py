@@ -162,6 +162,7 @@ def dispatch_policy(settings: Settings) -> DispatchPolicy:
         default_time_limit_s=settings.default_time_limit_s,
         exact_max_conflicts=settings.exact_max_conflicts,
         exact_stage_max_conflicts=settings.exact_stage_max_conflicts,
+        lns_min_conflicts=settings.lns_min_conflicts,
         large_solver=settings.large_solver,
         exact_workers=settings.exact_workers,
         exact_deterministic=settings.exact_deterministic,
@@ -230,9 +231,12 @@ def warm_up(runtime: Runtime) -> None:
         load_models(runtime, runtime.model_store)
     try:
         dispatch(WARMUP_REQUEST, runtime.policy)
-        # The large-problem paths too (tabu's kernels, the GNN-VAE), or their fallbacks.
-        for solver in sorted({runtime.policy.large_solver, "gnn_vae_refined"}):
-            large = OptionsIn(solver=solver, samples=2, time_limit_s=10.0)
+        # The large-problem paths too (tabu's kernels, the GNN-VAE), or their fallbacks, and
+        # last large-neighbourhood search (it runs to its limit: steps of milliseconds here,
+        # the first one compiling its kernels once the others' start is compiled).
+        warmed = dict.fromkeys([runtime.policy.large_solver, "gnn_vae_refined"], 10.0)
+        for solver, limit_s in {**warmed, "lns": 0.5}.items():
+            large = OptionsIn(solver=solver, samples=2, time_limit_s=limit_s)
             dispatch(WARMUP_REQUEST.model_copy(update={"options": large}), runtime.policy)
         # The paths form: geometry, dependency plan, executor and clearance kernels.
         plan_paths(PATHS_WARMUP_REQUEST, runtime.policy, GeometrySettings())

@@ -379,6 +379,21 @@ class OrientationGraph:
             self.kernel_args(),
         )
 
+    def topological_rank(self, a_first: np.ndarray) -> np.ndarray | None:
+        """Each node's position in a topological order of the node graph that the directions
+        a_first (M,) bool make, or None where they close a cycle. Shapes: -> (V,) int64."""
+        p = self.problem
+        rank = _topological_rank(
+            a_first.astype(np.int8),
+            self.succ,
+            self.inc_start,
+            self.inc_conf,
+            p.conf_a.astype(np.int64),
+            p.conf_b.astype(np.int64),
+        )
+        acyclic = p.n_nodes <= 1 or int(rank.max()) == p.n_nodes - 1
+        return rank if acyclic else None
+
     def count_type_move(self, counts: np.ndarray, conflict: int, now_following: bool) -> None:
         """Update ``counts`` (Q,) in place for ``conflict`` having turned following-type (or
         exclusive, if not ``now_following``)."""

@@ -68,6 +68,7 @@ SolverName = Literal[
     "random",
     "tabu",
     "priority_tabu",
+    "lns",
     "cmaes",
     "bbts",
 ]

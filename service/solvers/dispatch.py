@@ -45,6 +45,7 @@ from service.solvers import (  # noqa: F401  (registers the solvers)
     fcfs,
     gnn_vae,
     hybrid,
+    lns,
     portfolio,
     priority,
     random_search,
@@ -98,6 +99,7 @@ class DispatchPolicy:
     default_time_limit_s: float = 5.0
     exact_max_conflicts: int = 60
     exact_stage_max_conflicts: int = 10_000
+    lns_min_conflicts: int = 700
     large_solver: str = "priority_tabu"
     exact_workers: int = 1
     exact_deterministic: bool = False
@@ -202,6 +204,7 @@ def solve_problem(
         models=policy.models,
         exact_max_conflicts=policy.exact_max_conflicts,
         exact_stage_max_conflicts=policy.exact_stage_max_conflicts,
+        lns_min_conflicts=policy.lns_min_conflicts,
         first_stage=policy.large_solver,
         exact_deterministic=policy.exact_deterministic,
     )

@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -57,12 +57,16 @@ __all__ = [
     "ExactModel",
     "ExactResult",
     "Tuning",
+    "add_waits",
     "build_model",
     "build_seconds",
+    "delay_weights",
     "exact",
     "improve",
+    "integer_times",
     "search",
     "solve",
+    "time_slots",
     "top_assignments",
 ]
 
@@ -181,6 +185,15 @@ def time_scale(problem: Problem) -> float:
     return cap
 
 
+def integer_times(problem: Problem) -> tuple[float, np.ndarray, int]:
+    """-> (scale, (P,) int64 scaled times, horizon): the time scale, every time point's
+    time on it, and a bound on any delay (all robots one after another)."""
+    scale = time_scale(problem)
+    ti = np.rint(problem.tp_time * scale).astype(np.int64)  # (P,)
+    first_tp, last_tp = problem.tp_start[:-1], problem.last_tp
+    return scale, ti, int(ti[first_tp].max() + (ti[last_tp] - ti[first_tp]).sum())
+
+
 def build_seconds(problem: Problem, cliques: Cliques) -> float:
     """About how long :func:`build_model` takes on this machine (measured rates above)."""
     binding = cliques.binding()
@@ -194,11 +207,8 @@ def build_seconds(problem: Problem, cliques: Cliques) -> float:
 def build_model(problem: Problem, cliques: Cliques, objective: Objective) -> ExactModel:
     """The CP-SAT model of ``problem`` for ``objective`` (see module doc)."""
     # Data.
-    scale = time_scale(problem)
-    ti = np.rint(problem.tp_time * scale).astype(np.int64)  # (P,) integer times
-    first_tp, last_tp = problem.tp_start[:-1], problem.last_tp
-    horizon = int(ti[first_tp].max() + (ti[last_tp] - ti[first_tp]).sum())
-    n_events, tp_event = problem.events.size, problem.tp_event
+    scale, ti, horizon = integer_times(problem)
+    n_events, tp_event, last_tp = problem.events.size, problem.tp_event, problem.last_tp
     model = cp_model.CpModel()
     m = problem.n_conflicts
 
@@ -206,7 +216,7 @@ def build_model(problem: Problem, cliques: Cliques, objective: Objective) -> Exa
     a_first = [model.new_bool_var(f"a_first_{c}") for c in range(m)]
     following = [model.new_bool_var(f"following_{c}") for c in range(m)]
     delay = [model.new_int_var(0, horizon, f"delay_{e}") for e in range(n_events)]
-    delay.append(model.new_constant(0))  # the zero-delay slot E
+    delay.append(0)  # the zero-delay slot E
 
     # Constraints.
     _add_acyclicity(model, problem, a_first)
@@ -215,11 +225,8 @@ def build_model(problem: Problem, cliques: Cliques, objective: Objective) -> Exa
     for e, nxt in enumerate(problem.event_next.tolist()):
         if nxt >= 0:
             model.add(delay[nxt] >= delay[e])
-    slots = _time_slots(problem, ti, a_first, following)
-    for target, lits, src, off in slots:
-        if src == n_events and off <= 0:
-            continue  # reads zero delay and waits for nothing: always satisfied
-        model.add(delay[target] >= delay[src] + off).only_enforce_if(lits)
+    slots = time_slots(problem, ti, a_first, following, np.flatnonzero(~problem.realized))
+    add_waits(model, slots, delay)
     if objective == "sync_completion":
         _pin_delays(model, problem, delay, slots, horizon)
 
@@ -262,10 +269,12 @@ def _add_density(model: cp_model.CpModel, cliques: Cliques, following: list) -> 
         model.add(cp_model.LinearExpr.sum(terms) <= budget[q])
 
 
-def _time_slots(
-    problem: Problem, ti: np.ndarray, a_first: list, following: list
+def time_slots(
+    problem: Problem, ti: np.ndarray, a_first: Sequence, following: Sequence, conflicts: np.ndarray
 ) -> list[tuple[int, list, int, int]]:
-    """(target event, enforcing literals, source event, integer offset) per time constraint.
+    """(target event, enforcing literals, source event, integer offset) per time constraint
+    of the given conflicts (never realized ones: they only relate passed points), whose
+    literals ``a_first[c]`` and ``following[c]`` are looked up by conflict index.
 
     Each conflict gives four: for each side passing second, a following-level
     wait (when the other side passes first) and an exclusive-level wait (when it
@@ -274,7 +283,7 @@ def _time_slots(
     tp_event = problem.tp_event
     pe, px = problem.tp_pair_enter, problem.tp_pair_exit
     slots = []
-    for c in np.flatnonzero(~problem.realized).tolist():  # realized: only passed points
+    for c in conflicts.tolist():
         for second in (0, 1):
             first = 1 - second
             first_lit = a_first[c] if first == 0 else a_first[c].Not()
@@ -286,6 +295,24 @@ def _time_slots(
             ):
                 slots.append((target, lits, int(tp_event[src_tp]), int(ti[src_tp] - ti[target_tp])))
     return slots
+
+
+def add_waits(
+    model: cp_model.CpModel, slots: list[tuple[int, list, int, int]], delay: Sequence
+) -> None:
+    """Each slot as ``delay[target] >= delay[src] + offset`` under its literals.
+
+    A delay is a variable or a known integer (a robot whose times a neighbourhood
+    search holds fixed, or the zero-delay slot E); between two known ones the slot
+    either always holds (dropped) or never (its literals may not all be true).
+    """
+    for target, lits, src, off in slots:
+        lhs, rhs = delay[target], delay[src]
+        if isinstance(lhs, int) and isinstance(rhs, int):
+            if lhs < rhs + off:
+                model.add_bool_or([lit.Not() for lit in lits])
+        elif not (isinstance(rhs, int) and rhs + off <= 0):  # else waits for nothing
+            model.add(lhs >= rhs + off).only_enforce_if(lits)
 
 
 def _pin_delays(
@@ -335,10 +362,10 @@ def _set_objective(
             model.add_abs_equality(dev[i], n * completion[i] - total)
         model.minimize(n * total + sum(dev))
     else:  # avg_delay: mean over robots of the mean delay over the robot's time points
-        model.minimize(sum(int(w) * delay[e] for e, w in enumerate(_delay_weights(problem)) if w))
+        model.minimize(sum(int(w) * delay[e] for e, w in enumerate(delay_weights(problem)) if w))
 
 
-def _delay_weights(problem: Problem) -> np.ndarray:
+def delay_weights(problem: Problem) -> np.ndarray:
     """(E,) integer weight of each event's delay in avg_delay (proportional to the true weights)."""
     counts = np.diff(problem.tp_start)  # (R,) time points per robot
     scale = math.lcm(*np.unique(counts).tolist())

@@ -12,6 +12,11 @@ comes first, improving in stages:
    measured better than the GNN-VAE refined by tabu search, ``gnn_vae_refined``), or
    tabu search from the previous answer in a re-schedule, with FIRST_STAGE_SHARE of
    the budget;
+3. **large-neighbourhood search** (from ``lns_min_conflicts`` conflicts up to
+   ``exact_stage_max_conflicts``, for the objectives that are sums): CP-SAT re-plans
+   a few robots at a time from the best answer so far until the deadline
+   (:mod:`service.solvers.lns`), instead of the next stage: on whole models of
+   this size one CP-SAT worker barely moves from its hint; or
 3. **exact**: CP-SAT hinted with the best answer so far, for the rest of the
    budget; it proves optimality where it can (``solver.optimal`` is true only
    then) and never returns worse than its hint (the cheaper is kept, by the one
@@ -47,6 +52,7 @@ import numpy as np
 from service.core.assignment import Assignments
 from service.core.decompose import DECOMPOSABLE, Part, join, parts
 from service.solvers.exact import build_seconds, improve
+from service.solvers.lns import LNS_OBJECTIVES, lns_search
 from service.solvers.registry import SolveContext, SolverOutput, get_solver, register
 from service.solvers.tabu import plain_start, tabu_search
 
@@ -109,18 +115,29 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
         return replace(best, optimal=True, detail="no conflict")
     cost = _cost(ctx, best.assignment)
     too_large = problem.n_conflicts > ctx.exact_stage_max_conflicts  # for CP-SAT to help
+    uses_lns = (
+        ctx.objective in LNS_OBJECTIVES
+        and max(ctx.lns_min_conflicts, ctx.exact_max_conflicts + 1) <= problem.n_conflicts
+        and not too_large
+    )
     # The least time worth a CP-SAT stage (inf: none at this size).
-    exact_min_s = np.inf if too_large else build_seconds(problem, ctx.cliques)
+    exact_min_s = np.inf if too_large or uses_lns else build_seconds(problem, ctx.cliques)
     exact_min_s *= EXACT_TIME_PER_BUILD
     if problem.n_conflicts > ctx.exact_max_conflicts:
         first = "tabu" if ctx.warm is not None else ctx.first_stage
         left = deadline - time.monotonic()
-        exact_fits = (1 - FIRST_STAGE_SHARE) * left > exact_min_s
-        found = get_solver(first)(_with_time(ctx, FIRST_STAGE_SHARE * left if exact_fits else left))
+        shared = uses_lns or (1 - FIRST_STAGE_SHARE) * left > exact_min_s  # a stage follows
+        found = get_solver(first)(_with_time(ctx, FIRST_STAGE_SHARE * left if shared else left))
         found_cost = np.inf if found is None else _cost(ctx, found.assignment)
         if found is not None and found_cost <= cost:
             best, cost = found, found_cost
             stages.append(first)
+    if uses_lns:
+        found_lns, found_cost, steps = lns_search(ctx, best.assignment, deadline, ctx.seed)
+        if found_cost < cost:
+            best, stages = replace(best, assignment=found_lns), [*stages, f"lns x{steps}"]
+        verdict = f"no CP-SAT stage from {ctx.lns_min_conflicts} conflicts ({steps} LNS steps)"
+        return replace(best, optimal=False, detail=_detail(stages, verdict))
     left = deadline - time.monotonic()
     if left <= exact_min_s:
         if left > 0 and (too_large or problem.n_conflicts > ctx.exact_max_conflicts):

@@ -50,6 +50,9 @@ class SolveContext:
     first_stage: str = "priority_tabu"
     # ... and no CP-SAT stage at all above this many (it improves nothing there in seconds).
     exact_stage_max_conflicts: int = 10_000
+    # ... and large-neighbourhood search instead of CP-SAT on the whole model from this many
+    # (for the objectives that are sums; service/solvers/lns.py).
+    lns_min_conflicts: int = 700
     # CP-SAT limited in deterministic time too (exact.solve(deterministic=True)), so that
     # the ``exact`` solver's answer is the same for the same seed even when it is cut.
     exact_deterministic: bool = False

@@ -1,0 +1,187 @@
+"""Large-neighbourhood search: every sub-problem's answer is valid and no worse, the held
+graph's reachability survives the pruning of implied arcs, and with every robot freed one
+step is the whole problem (brute force on tiny problems)."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from service.core.assignment import Assignments
+from service.core.check import check
+from service.core.problem import problem_from_request
+from service.core.schemas import ScheduleRequest
+from service.learning.generate import small_problem, stitched_problem
+from service.solvers import lns
+from service.solvers.dispatch import DispatchPolicy, dispatch
+from service.solvers.registry import SolveContext
+from service.solvers.tabu import plain_start
+from tests.reference import feasible_assignments, reference_problem, tiny_request
+
+DATA = Path(__file__).resolve().parents[1] / "data" / "conformance"
+
+
+def _conformance(name: str, index: int = 0) -> dict:
+    return json.loads((DATA / f"{name}.jsonl").read_text().splitlines()[index])
+
+
+def _context(request: dict, objective: str, time_limit_s: float = 1.0) -> SolveContext:
+    validated = ScheduleRequest.model_validate({**request, "objective": objective})
+    return SolveContext(problem_from_request(validated), objective, time_limit_s)
+
+
+def _closure(n: int, tails: np.ndarray, heads: np.ndarray) -> np.ndarray:
+    """(n, n) bool: v reachable from u by one or more arcs."""
+    reach = np.zeros((n, n), dtype=bool)
+    reach[tails, heads] = True
+    for k in range(n):  # Warshall
+        reach |= reach[:, [k]] & reach[[k], :]
+    return reach
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(n=st.integers(2, 12), density=st.floats(0.05, 0.9), seed=st.integers(0, 10_000))
+def test_pruning_implied_arcs_keeps_reachability(n: int, density: float, seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    order = rng.permutation(n)  # a DAG: arcs go forward in this order
+    pairs = [(order[i], order[j]) for i in range(n) for j in range(i + 1, n)]
+    arcs = [p for p in pairs if rng.random() < density]
+    starts = np.array(sorted({int(u) for u, _ in arcs} | {int(order[-1])}), dtype=np.int64)
+    arcs.sort(key=lambda arc: int(np.flatnonzero(starts == arc[0])[0]))  # grouped by start
+    tails = np.array([u for u, _ in arcs], dtype=np.int64)
+    heads = np.array([v for _, v in arcs], dtype=np.int64)
+    kept_tails, kept_heads = lns._without_shortcuts(starts, tails, heads, n)
+    assert kept_tails.size <= tails.size
+    assert np.array_equal(_closure(n, tails, heads), _closure(n, kept_tails, kept_heads))
+
+
+def _request(family: str, seed: int, robots: int) -> dict:
+    if family == "tiny":
+        return tiny_request(seed)
+    if family == "small":
+        return small_problem(seed)
+    if family == "stitched":
+        return stitched_problem(seed, robots, 3.0)
+    names = ["wh_25", "wh_50", "geo_dense_25"]
+    return _conformance(names[seed % 3], seed % 4)["request"]
+
+
+@settings(
+    max_examples=40, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow]
+)
+@given(
+    family=st.sampled_from(["tiny", "small", "stitched", "conformance"]),
+    seed=st.integers(0, 10_000),
+    robots=st.integers(3, 30),
+    picked=st.integers(1, 6),
+    objective=st.sampled_from(lns.LNS_OBJECTIVES),
+)
+def test_every_sub_problem_answer_is_valid_and_no_worse(
+    family: str, seed: int, robots: int, picked: int, objective: str
+) -> None:
+    """Whatever robots are freed, the sub-problem's answer passes the checker (cycles
+    through held robots included: no answer needs rejecting) and costs no more than the
+    answer it started from (up to the integer time grid)."""
+    ctx = _context(_request(family, seed, robots), objective)
+    problem = ctx.problem
+    if problem.n_conflicts == 0:
+        return
+    start = plain_start(ctx)
+    rng = np.random.default_rng(seed)
+    chosen = rng.choice(problem.n_robots, size=min(picked, problem.n_robots), replace=False)
+    fleet = lns._Fleet.of(ctx)
+    a_first, following = start.a_first[0], start.following[0]
+    neighbourhood = lns._Neighbourhood(ctx, fleet, np.sort(chosen), a_first, following)
+    found = neighbourhood.solve(a_first, following, 5.0, seed)
+    assert found is not None  # the hint is complete and feasible
+    checks = check(problem, ctx.cliques, found)
+    assert checks.acyclic[0] and checks.density[0]
+    assert ctx.orientation.topological_rank(found.a_first[0]) is not None
+    both = Assignments(
+        np.concatenate([found.a_first, start.a_first]),
+        np.concatenate([found.following, start.following]),
+    )
+    costs = ctx.evaluator.evaluate(both).costs[objective]  # (2,) found, start
+    grid = float(problem.tp_time.max()) / 10**5  # the time grid's resolution (TIME_DIGITS)
+    assert costs[0] <= costs[1] + grid
+
+
+@pytest.mark.parametrize("objective", lns.LNS_OBJECTIVES)
+@pytest.mark.parametrize("seed", range(12))
+def test_freeing_every_robot_reaches_the_brute_force_optimum(
+    seed: int, objective: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    request = tiny_request(seed, objective)
+    ctx = _context(request, objective)
+    monkeypatch.setattr(lns, "LNS_ROBOTS", ctx.problem.n_robots)
+    best = min(c.costs[objective] for c in feasible_assignments(reference_problem(request)))
+    _, cost, steps = lns.lns_search(ctx, plain_start(ctx), time.monotonic() + 0.2, seed)
+    assert steps >= 1
+    assert cost == pytest.approx(best, rel=1e-6, abs=1e-9)
+
+
+def test_lns_ends_at_its_deadline_with_a_valid_answer() -> None:
+    ctx = _context(_conformance("wh_50")["request"], "avg_completion")
+    start = plain_start(ctx)
+    begin = time.monotonic()
+    found, cost, steps = lns.lns_search(ctx, start, begin + 0.5, 0)
+    elapsed = time.monotonic() - begin
+    assert 0.5 - lns.MIN_STEP_S <= elapsed <= 0.5 + 0.3  # ends at, not far past, its deadline
+    assert steps >= 1
+    checks = check(ctx.problem, ctx.cliques, found)
+    assert checks.acyclic[0] and checks.density[0]
+    assert cost <= float(ctx.evaluator.evaluate(start).costs["avg_completion"][0])
+
+
+@pytest.mark.parametrize("objective", ["avg_completion", "avg_delay"])
+def test_auto_runs_lns_instead_of_cp_sat_from_its_threshold(
+    objective: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import service.solvers.portfolio as portfolio
+
+    def no_cp_sat(*args: object, **kwargs: object) -> object:
+        raise AssertionError("the CP-SAT stage ran where LNS should")
+
+    searched = []
+
+    def counted(*args: object, **kwargs: object) -> object:
+        searched.append(1)
+        return lns.lns_search(*args, **kwargs)
+
+    monkeypatch.setattr(portfolio, "improve", no_cp_sat)
+    monkeypatch.setattr(portfolio, "lns_search", counted)
+    line = _conformance("wh_50")
+    body = {
+        **line["request"],
+        "objective": objective,
+        "options": {"solver": "auto", "time_limit_s": 1.0},
+    }
+    policy = DispatchPolicy(exact_max_conflicts=0, lns_min_conflicts=1)
+    begin = time.perf_counter()
+    answer = dispatch(ScheduleRequest.model_validate(body), policy)
+    assert time.perf_counter() - begin <= 1.1 + 0.15
+    assert answer.solver.name == "auto" and not answer.solver.optimal
+    assert searched  # every component (wh_50 has several) went to LNS
+    assert answer.checks.acyclic and answer.checks.density
+    if objective == "avg_completion":
+        assert answer.cost >= line["ref_cost"] * (1 - 1e-9)
+
+
+def test_auto_keeps_cp_sat_for_the_objectives_lns_does_not_search() -> None:
+    line = _conformance("wh_25")
+    body = {
+        **line["request"],
+        "objective": "max_completion",
+        "options": {"solver": "auto", "time_limit_s": 1.0},
+    }
+    policy = DispatchPolicy(exact_max_conflicts=0, lns_min_conflicts=1)
+    answer = dispatch(ScheduleRequest.model_validate(body), policy)
+    assert answer.solver.name == "auto"
+    assert "LNS" not in (answer.solver.detail or "")
+    assert answer.checks.acyclic and answer.checks.density
