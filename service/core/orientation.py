@@ -382,17 +382,18 @@ class OrientationGraph:
     def topological_rank(self, a_first: np.ndarray) -> np.ndarray | None:
         """Each node's position in a topological order of the node graph that the directions
         a_first (M,) bool make, or None where they close a cycle. Shapes: -> (V,) int64."""
+        rank = _topological_rank(*self.walk_args(a_first))
+        n_nodes = self.problem.n_nodes
+        return rank if n_nodes <= 1 or int(rank.max()) == n_nodes - 1 else None
+
+    def walk_args(self, a_first: np.ndarray) -> tuple[np.ndarray, ...]:
+        """What a kernel walking the node graph of the directions a_first (M,) bool takes:
+        (orient (M,) int8, succ, inc_start, inc_conf, conf_a, conf_b)."""
         p = self.problem
-        rank = _topological_rank(
-            a_first.astype(np.int8),
-            self.succ,
-            self.inc_start,
-            self.inc_conf,
-            p.conf_a.astype(np.int64),
-            p.conf_b.astype(np.int64),
-        )
-        acyclic = p.n_nodes <= 1 or int(rank.max()) == p.n_nodes - 1
-        return rank if acyclic else None
+        return (
+            a_first.astype(np.int8), self.succ, self.inc_start, self.inc_conf,
+            p.conf_a.astype(np.int64), p.conf_b.astype(np.int64),
+        )  # fmt: skip
 
     def count_type_move(self, counts: np.ndarray, conflict: int, now_following: bool) -> None:
         """Update ``counts`` (Q,) in place for ``conflict`` having turned following-type (or

@@ -39,7 +39,7 @@ from dataclasses import dataclass, replace
 import numba
 import numpy as np
 from ortools.sat.python import cp_model
-from scipy.sparse import coo_array
+from scipy.sparse import coo_array, csr_array
 
 from service.core.assignment import Assignments
 from service.core.csr import csr
@@ -61,9 +61,9 @@ __all__ = ["LNS_OBJECTIVES", "LNS_ROBOTS", "SUB_TIME_S", "lns_search"]
 
 # Objectives a neighbourhood's part of the cost stands for (sums over robots).
 LNS_OBJECTIVES = ("avg_completion", "avg_delay")
-# Robots re-planned per step. Measured (six 100-robot warehouses, 1.5 s priority_tabu
-# then 3.5 s of LNS, mean cost ratio against 30-s references): 3 robots 0.930, 4 0.953,
-# 6 0.952, 10 0.892 (fewer steps: ~0.35 s each against ~0.05-0.13 s).
+# Robots re-planned per step. Measured (six 100-robot warehouses, 1.5 s of priority_tabu
+# then 3.5 s of LNS, mean cost ratio against 30-s references of two CP-SAT workers):
+# 5 robots 0.866 (31-54 steps), 8 robots 0.864 (15-24 steps).
 LNS_ROBOTS = 5
 # Time limit of one sub-problem; most are proven optimal well within it at 100 robots.
 SUB_TIME_S = 0.3
@@ -84,7 +84,7 @@ class _Fleet:
 
     conf_robots: np.ndarray  # (M, 2) robot of each side
     robot_conflicts: tuple[np.ndarray, np.ndarray]  # CSR robot -> its conflicts
-    shared: object  # (R, R) scipy CSR: conflicts between each pair of robots
+    shared: csr_array  # (R, R) conflicts between each pair of robots
     event_start: np.ndarray  # (R+1,) events of robot r are event_start[r]:event_start[r+1]
     scale: float
     ti: np.ndarray  # (P,) int64 times on CP-SAT's grid
@@ -238,15 +238,7 @@ class _Neighbourhood:
         boundary = np.zeros(p.n_nodes, dtype=bool)
         boundary[ends[~picked_node[ends]]] = True
         tails, heads = _held_reach(
-            np.flatnonzero(boundary),
-            boundary,
-            picked_node,
-            a_first.astype(np.int8),
-            graph.succ,
-            graph.inc_start,
-            graph.inc_conf,
-            p.conf_a.astype(np.int64),
-            p.conf_b.astype(np.int64),
+            np.flatnonzero(boundary), boundary, picked_node, *graph.walk_args(a_first)
         )
         nodes = np.flatnonzero(boundary | picked_node)  # (N,)
         order = np.zeros(nodes.size, dtype=np.int64)  # (N,) hint: the current order
