@@ -90,6 +90,7 @@ class _Fleet:
     ti: np.ndarray  # (P,) int64 times on CP-SAT's grid
     horizon: int
     grid: Evaluator  # least delays of the grid-rounded problem
+    delay_weight: np.ndarray  # (E,) int weight of each event's delay in avg_delay
 
     @classmethod
     def of(cls, ctx: SolveContext) -> _Fleet:
@@ -113,6 +114,7 @@ class _Fleet:
             ti,
             horizon,
             grid,
+            delay_weights(p),
         )
 
     def conflicts_of(self, robots: np.ndarray) -> np.ndarray:
@@ -196,7 +198,7 @@ class _Neighbourhood:
             last = problem.tp_event[problem.last_tp[robots]]
             model.minimize(sum(delay[e] for e in last.tolist()))
         else:  # avg_delay
-            weights = delay_weights(problem)
+            weights = fleet.delay_weight
             model.minimize(
                 sum(
                     int(weights[e]) * delay[e]
