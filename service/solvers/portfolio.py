@@ -28,7 +28,7 @@ comes first, improving in stages:
    whenever it stops on its own, so that an unproven answer comes at the deadline,
    not before.
 
-Small problems go straight to stage 3 (CP-SAT proves them in milliseconds).
+Small problems go straight to the exact stage (CP-SAT proves them in milliseconds).
 Robots that share no conflict, directly or through others, form independent
 components (:mod:`service.core.decompose`); for the objectives that decompose,
 each is solved on its own, smallest first, with the time left shared by
