@@ -15,9 +15,15 @@ search"). This search solves many small exact problems instead. Each step
    conflicts leave;
 3. solves that sub-problem with CP-SAT, hinted with the current answer, for the
    picked robots' part of the objective, within SUB_TIME_S;
-4. keeps the new assignment when the one evaluator finds it cheaper and its node
-   graph is acyclic (a cycle could close through robots held fixed, which the
-   sub-problem does not see).
+4. keeps the new assignment when the one evaluator finds it cheaper (and, as a
+   guard, its node graph is acyclic).
+
+Cycles can close through held robots: where pair sections lie inside merged nodes
+such a cycle needs no waiting, so time bounds alone do not exclude it (every
+sub-problem answer on a two-lane warehouse closed one without the following). The
+sub-problem orders the picked robots' nodes and the held nodes its conflicts
+touch (*boundary* nodes), with one precedence per pair of boundary nodes that
+the held graph connects (see ``_Neighbourhood._order``).
 
 The held robots keep their times in the sub-problem's answer, so their least
 times can only fall: a cheaper sub-problem answer is a cheaper assignment. Times
