@@ -49,7 +49,7 @@ from scipy.sparse import coo_array, csr_array
 
 from service.core.assignment import Assignments
 from service.core.csr import csr
-from service.core.evaluate import Evaluator
+from service.core.evaluate import Evaluation, Evaluator
 from service.core.orientation import _leads_to
 from service.solvers.exact import (
     LINEARIZATION_LEVEL,
@@ -146,23 +146,62 @@ class _Fleet:
         return np.array(picked, dtype=np.int64)
 
 
+@dataclass(frozen=True, eq=False)
+class _Incumbent:
+    """The current answer and what every step reads of it, found once per accepted answer.
+
+    Shapes: M conflicts, E events, V nodes, Q cliques, R robots.
+    """
+
+    a_first: np.ndarray  # (M,) bool
+    following: np.ndarray  # (M,) bool
+    cost: float
+    delay: np.ndarray  # (R,) each robot's delay at completion
+    grid_delay: np.ndarray  # (E+1,) int64 least delays on CP-SAT's grid
+    rank: np.ndarray  # (V,) node positions in a topological order
+    counts: np.ndarray  # (Q,) following-type conflicts per clique
+
+    @classmethod
+    def of(
+        cls,
+        ctx: SolveContext,
+        fleet: _Fleet,
+        answer: Assignments,
+        rank: np.ndarray,
+        evaluation: Evaluation,
+    ) -> _Incumbent:
+        """``answer`` with its topological rank and its evaluation (both already found)."""
+        a_first, following = answer.a_first[0], answer.following[0]
+        grid = fleet.grid.evaluate(answer).event_delay[0]
+        return cls(
+            a_first,
+            following,
+            float(evaluation.costs[ctx.objective][0]),
+            evaluation.completion[0] - ctx.problem.free_time(),
+            np.rint(grid * fleet.scale).astype(np.int64),
+            rank,
+            ctx.cliques.following_counts(following[None])[0],
+        )
+
+    @classmethod
+    def start(cls, ctx: SolveContext, fleet: _Fleet, answer: Assignments) -> _Incumbent:
+        """The valid ``answer`` a search starts from."""
+        rank = ctx.orientation.topological_rank(answer.a_first[0])
+        if rank is None:
+            raise ValueError("the answer to search from closes a cycle")
+        return cls.of(ctx, fleet, answer, rank, ctx.evaluator.evaluate(answer))
+
+
 class _Neighbourhood:
     """The sub-problem of re-planning ``robots`` with every other robot's times held."""
 
     def __init__(
-        self,
-        ctx: SolveContext,
-        fleet: _Fleet,
-        robots: np.ndarray,
-        a_first: np.ndarray,
-        following: np.ndarray,
+        self, ctx: SolveContext, fleet: _Fleet, robots: np.ndarray, current: _Incumbent
     ) -> None:
         # Data.
         problem = ctx.problem
+        a_first, following, grid_delay = current.a_first, current.following, current.grid_delay
         self.conflicts = fleet.conflicts_of(robots)  # (K,) freed
-        held = fleet.grid.evaluate(Assignments(a_first[None], following[None]))
-        grid_delay = np.rint(held.event_delay[0] * fleet.scale).astype(np.int64)  # (E+1,)
-        rank = ctx.orientation.topological_rank(a_first)  # (V,) the current answer's order
         model = cp_model.CpModel()
         m = problem.n_conflicts
 
@@ -191,8 +230,8 @@ class _Neighbourhood:
 
         # Constraints.
         self._fix(ctx, a_lit, f_lit)
-        self._order(ctx, fleet, robots, a_lit, a_first, rank)
-        self._budgets(ctx, following, f_lit)
+        self._order(ctx, robots, a_lit, current)
+        self._budgets(ctx, current, f_lit)
         for r in robots.tolist():
             for e in range(fleet.event_start[r] + 1, fleet.event_start[r + 1]):
                 model.add(delay[e] >= delay[e - 1])
@@ -226,13 +265,7 @@ class _Neighbourhood:
                 model.add(f_lit[c] == 0)
 
     def _order(
-        self,
-        ctx: SolveContext,
-        fleet: _Fleet,
-        robots: np.ndarray,
-        a_lit: list,
-        a_first: np.ndarray,
-        rank: np.ndarray | None,
+        self, ctx: SolveContext, robots: np.ndarray, a_lit: list, current: _Incumbent
     ) -> None:
         """Acyclicity: node positions increasing along the picked robots' paths, along every
         freed conflict, and from each held node a freed conflict touches (a *boundary* node)
@@ -246,12 +279,10 @@ class _Neighbourhood:
         boundary = np.zeros(p.n_nodes, dtype=bool)
         boundary[ends[~picked_node[ends]]] = True
         tails, heads = _held_reach(
-            np.flatnonzero(boundary), boundary, picked_node, *graph.walk_args(a_first)
+            np.flatnonzero(boundary), boundary, picked_node, *graph.walk_args(current.a_first)
         )
         nodes = np.flatnonzero(boundary | picked_node)  # (N,)
-        order = np.zeros(nodes.size, dtype=np.int64)  # (N,) hint: the current order
-        if rank is not None:
-            order = np.argsort(np.argsort(rank[nodes]))
+        order = np.argsort(np.argsort(current.rank[nodes]))  # (N,) hint: the current order
         pos: dict[int, cp_model.IntVar] = {}
         for v, hint in zip(nodes.tolist(), order.tolist(), strict=True):
             pos[v] = model.new_int_var(0, nodes.size - 1, f"pos_{v}")
@@ -266,11 +297,10 @@ class _Neighbourhood:
             model.add(pos[b] >= pos[a] + 1).only_enforce_if(a_lit[c])
             model.add(pos[a] >= pos[b] + 1).only_enforce_if(a_lit[c].Not())
 
-    def _budgets(self, ctx: SolveContext, following: np.ndarray, f_lit: list) -> None:
+    def _budgets(self, ctx: SolveContext, current: _Incumbent, f_lit: list) -> None:
         """At most what its held conflicts leave of each binding clique's budget."""
         cliques, graph, model = ctx.cliques, ctx.orientation, self.em.model
-        counts = cliques.following_counts(following[None])[0]  # (Q,) current
-        size = cliques.size
+        following, size = current.following, cliques.size
         members: dict[int, list[int]] = {}
         for c in self.conflicts.tolist():
             for q in graph.cq_clique[graph.cq_start[c] : graph.cq_start[c + 1]].tolist():
@@ -279,18 +309,16 @@ class _Neighbourhood:
             budget = int(cliques.budget[q])
             if budget <= 0 or budget >= size[q]:
                 continue  # forbidden (see _fix) or never binding
-            held = int(counts[q]) - int(following[freed].sum())
+            held = int(current.counts[q]) - int(following[freed].sum())
             model.add(sum(f_lit[c] for c in freed) <= budget - held)
 
-    def solve(
-        self, a_first: np.ndarray, following: np.ndarray, time_limit_s: float, seed: int
-    ) -> Assignments | None:
+    def solve(self, current: _Incumbent, time_limit_s: float, seed: int) -> Assignments | None:
         """The current answer with the freed conflicts as CP-SAT decides them (None if it
         found nothing within the limit)."""
         result = search(self.em, time_limit_s, seed, tuning=SUB_TUNING)
         if result is None:
             return None
-        a_first, following = a_first.copy(), following.copy()
+        a_first, following = current.a_first.copy(), current.following.copy()
         a_first[self.conflicts] = result.assignment.a_first[0]
         following[self.conflicts] = result.assignment.following[0]
         return Assignments(a_first[None], following[None])
@@ -384,27 +412,25 @@ def lns_search(
     """LNS from the valid ``start`` until ``deadline`` (monotonic) -> (best, its cost, steps)."""
     fleet = _Fleet.of(ctx)
     rng = np.random.default_rng(seed)
-    free_time = ctx.problem.free_time()  # (R,)
-    evaluation = ctx.evaluator.evaluate(start)
-    best, cost = start, float(evaluation.costs[ctx.objective][0])
-    a_first, following = best.a_first[0], best.following[0]
+    best, current = start, _Incumbent.start(ctx, fleet, start)
     steps = 0
     while deadline - time.monotonic() > MIN_STEP_S:
-        robots = fleet.pick(rng, evaluation.completion[0] - free_time, LNS_ROBOTS)
-        neighbourhood = _Neighbourhood(ctx, fleet, robots, a_first, following)
+        robots = fleet.pick(rng, current.delay, LNS_ROBOTS)
+        neighbourhood = _Neighbourhood(ctx, fleet, robots, current)
         left = deadline - time.monotonic()
         if left <= 0:
             break
-        found = neighbourhood.solve(a_first, following, min(SUB_TIME_S, left), seed + steps)
+        found = neighbourhood.solve(current, min(SUB_TIME_S, left), seed + steps)
         steps += 1
-        if found is None or ctx.orientation.topological_rank(found.a_first[0]) is None:
+        if found is None:
             continue
-        found_evaluation = ctx.evaluator.evaluate(found)
-        found_cost = float(found_evaluation.costs[ctx.objective][0])
-        if found_cost < cost:
-            best, cost, evaluation = found, found_cost, found_evaluation
-            a_first, following = best.a_first[0], best.following[0]
-    return best, cost, steps
+        rank = ctx.orientation.topological_rank(found.a_first[0])
+        if rank is None:  # a guard: the sub-problem excludes cycles
+            continue
+        evaluation = ctx.evaluator.evaluate(found)
+        if float(evaluation.costs[ctx.objective][0]) < current.cost:
+            best, current = found, _Incumbent.of(ctx, fleet, found, rank, evaluation)
+    return best, current.cost, steps
 
 
 @register("lns")

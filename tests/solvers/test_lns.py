@@ -96,9 +96,9 @@ def test_every_sub_problem_answer_is_valid_and_no_worse(
     rng = np.random.default_rng(seed)
     chosen = rng.choice(problem.n_robots, size=min(picked, problem.n_robots), replace=False)
     fleet = lns._Fleet.of(ctx)
-    a_first, following = start.a_first[0], start.following[0]
-    neighbourhood = lns._Neighbourhood(ctx, fleet, np.sort(chosen), a_first, following)
-    found = neighbourhood.solve(a_first, following, 5.0, seed)
+    current = lns._Incumbent.start(ctx, fleet, start)
+    neighbourhood = lns._Neighbourhood(ctx, fleet, np.sort(chosen), current)
+    found = neighbourhood.solve(current, 5.0, seed)
     assert found is not None  # the hint is complete and feasible
     checks = check(problem, ctx.cliques, found)
     assert checks.acyclic[0] and checks.density[0]
