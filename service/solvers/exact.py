@@ -126,10 +126,8 @@ class ExactModel:
     def add_hint(self, assignments: Assignments) -> None:
         """Hint the first assignment of the batch (replacing earlier hints)."""
         self.model.clear_hints()
-        for lit, val in zip(self.a_first, assignments.a_first[0].tolist(), strict=True):
-            self.model.add_hint(lit, val)
-        for lit, val in zip(self.following, assignments.following[0].tolist(), strict=True):
-            self.model.add_hint(lit, val)
+        add_hints(self.model, self.a_first, assignments.a_first[0].tolist())
+        add_hints(self.model, self.following, assignments.following[0].tolist())
 
     def exclude(self, assignments: Assignments) -> None:
         """No-good: forbid exactly the first assignment of the batch."""
@@ -142,6 +140,16 @@ class ExactModel:
             for lit, val in zip(lits, vals.tolist(), strict=True)
         ]
         self.model.add_bool_or(clause)
+
+
+def add_hints(
+    model: cp_model.CpModel, variables: Sequence[cp_model.IntVar], values: Sequence
+) -> None:
+    """Hint ``values`` for ``variables`` (not negated literals) with two calls on the model's
+    proto instead of one ``add_hint`` per variable: 0.2 ms instead of 7.6 ms for 2,000."""
+    hint = model.proto.solution_hint
+    hint.vars.extend([v.index for v in variables])
+    hint.values.extend([int(x) for x in values])
 
 
 # The least search time CP-SAT gets when building its model used up the time limit.
@@ -280,20 +288,23 @@ def time_slots(
     wait (when the other side passes first) and an exclusive-level wait (when it
     also is exclusive-type).
     """
-    tp_event = problem.tp_event
-    pe, px = problem.tp_pair_enter, problem.tp_pair_exit
+    enter, leave = problem.tp_pair_enter[conflicts], problem.tp_pair_exit[conflicts]  # (K, 2)
+    # The four slots' columns: a second (after b's entry, then exit), b second (after a's).
+    target_tp = enter[:, [0, 0, 1, 1]]  # (K, 4)
+    source_tp = np.stack([enter[:, 1], leave[:, 1], enter[:, 0], leave[:, 0]], axis=1)
+    target, source = problem.tp_event[target_tp].tolist(), problem.tp_event[source_tp].tolist()
+    offset = (ti[source_tp] - ti[target_tp]).tolist()
     slots = []
-    for c in conflicts.tolist():
-        for second in (0, 1):
-            first = 1 - second
-            first_lit = a_first[c] if first == 0 else a_first[c].Not()
-            target_tp = pe[c, second]
-            target = int(tp_event[target_tp])
-            for src_tp, lits in (
-                (pe[c, first], [first_lit]),
-                (px[c, first], [first_lit, following[c].Not()]),
-            ):
-                slots.append((target, lits, int(tp_event[src_tp]), int(ti[src_tp] - ti[target_tp])))
+    for k, c in enumerate(conflicts.tolist()):
+        a_lit, exclusive = a_first[c], following[c].Not()
+        b_lit = a_lit.Not()  # b passes first
+        t, s, o = target[k], source[k], offset[k]
+        slots += [
+            (t[0], [b_lit], s[0], o[0]),
+            (t[1], [b_lit, exclusive], s[1], o[1]),
+            (t[2], [a_lit], s[2], o[2]),
+            (t[3], [a_lit, exclusive], s[3], o[3]),
+        ]
     return slots
 
 

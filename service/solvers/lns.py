@@ -6,8 +6,9 @@ CP-SAT's own LNS reaches in 30 s on two cores, and CP-SAT on the whole model wit
 one worker barely moves from its hint (docs/benchmarks.md, "Large-neighbourhood
 search"). This search solves many small exact problems instead. Each step
 
-1. picks LNS_ROBOTS robots: a seed drawn with probability growing with its delay,
-   then robots drawn by how many conflicts they share with those picked so far;
+1. picks a few robots (LNS_ROBOTS at first, more after a plateau, see below): a seed
+   drawn with probability growing with its delay, then robots drawn by how many
+   conflicts they share with those picked so far;
 2. frees every conflict they take part in (direction and type) and holds every
    other robot's times at their current least values: a conflict with such a
    robot bounds the picked robot's delay (wait until it has passed, or pass
@@ -17,6 +18,11 @@ search"). This search solves many small exact problems instead. Each step
    picked robots' part of the objective, within SUB_TIME_S;
 4. keeps the new assignment when the one evaluator finds it cheaper (and, as a
    guard, its node graph is acyclic).
+
+A plateau: steps without improvement that together freed as many robots as the fleet
+has (STALL_COVER). Then each step frees GROWTH times as many robots (up to
+MAX_ROBOTS): some answers need many robots changed at once (a corridor's whole queue
+let through in the other order) and no sequence of small improving steps reaches them.
 
 Cycles can close through held robots: where pair sections lie inside merged nodes
 such a cycle needs no waiting, so time bounds alone do not exclude it (every
@@ -54,6 +60,7 @@ from service.core.orientation import _leads_to
 from service.solvers.exact import (
     LINEARIZATION_LEVEL,
     ExactModel,
+    add_hints,
     add_waits,
     delay_weights,
     integer_times,
@@ -67,16 +74,36 @@ __all__ = ["LNS_OBJECTIVES", "LNS_ROBOTS", "SUB_TIME_S", "lns_search"]
 
 # Objectives a neighbourhood's part of the cost stands for (sums over robots).
 LNS_OBJECTIVES = ("avg_completion", "avg_delay")
-# Robots re-planned per step. Measured (six 100-robot warehouses, 1.5 s of priority_tabu
-# then 3.5 s of LNS, mean cost ratio against 30-s references of two CP-SAT workers):
-# 5 robots 0.866 (31-54 steps), 8 robots 0.864 (15-24 steps).
-LNS_ROBOTS = 5
+# Robots re-planned per step, at first, and after a plateau. Measured (session 19, the
+# sub-problem tuning below; six 100-robot warehouses, 1.5 s of priority_tabu then LNS,
+# mean cost ratio against 30-s references of two CP-SAT workers, one run each, spread
+# about 0.01): always 5 robots 0.893 at 5 s, 0.921 at 10 s (two worlds stuck at 0.86
+# up to 20 s; 15 robots reached 0.989 there at 20 s); growth by 1.5 after 10 (5) steps
+# without improvement 0.898 (0.892) / 0.926 (0.958); from 8 robots after 10 (5) steps
+# 0.900 (0.905) / 0.960 (0.969); after a stall covering the fleet (shipped) 0.910 /
+# 0.956. A fixed step count grew too soon on 150-200-robot warehouses (10-15 steps in
+# 3.5 s, worse than 5 robots on 3 of 4); covering the fleet was the best of the three
+# on all 4 and on 50-robot ones better than 5 robots on all 4.
+LNS_ROBOTS = 8
+STALL_COVER = 1.0  # robots freed without improvement, per robot of the fleet
+GROWTH = 1.5
+MAX_ROBOTS = 40
 # Time limit of one sub-problem; most are proven optimal well within it at 100 robots.
 SUB_TIME_S = 0.3
 # CP-SAT's presolve of a sub-problem took most of its time (0.1-0.2 s of domain
 # propagation along the node positions, 80-120 loops, on 100-robot warehouses); without
-# it, from the complete hint, the same sub-problems were proven in 0.02-0.15 s.
-SUB_TUNING = {"cp_model_presolve": False}
+# it, from the complete hint, the same sub-problems were proven in 0.02-0.15 s. Of what
+# was left, two thirds went to CP-SAT's root-level closure of precedences (linear2
+# bounds, redone at each improving solution: perf, session 19); without it 20 sub-problems
+# of a 100-robot warehouse took 0.32 s instead of 1.30 s (two-lane: 0.62 s, 2.0 s), to the
+# same optima; without SAT inprocessing too, 30 others 0.36 s instead of 0.51 s (two-lane:
+# 0.46 s, 0.87 s), all proven optimal. Symmetry detection, FIXED_SEARCH and no probing
+# were measured and left at CP-SAT's defaults (no gain or slower).
+SUB_TUNING = {
+    "cp_model_presolve": False,
+    "transitive_precedences_work_limit": 0,
+    "use_sat_inprocessing": False,
+}
 # Least time left worth another step (building a sub-problem takes ~10-30 ms).
 MIN_STEP_S = 0.03
 
@@ -127,6 +154,12 @@ class _Fleet:
         """(K,) sorted distinct conflicts any of ``robots`` takes part in."""
         start, conflicts = self.robot_conflicts
         return np.unique(np.concatenate([conflicts[start[r] : start[r + 1]] for r in robots]))
+
+    def events_of(self, robots: np.ndarray) -> np.ndarray:
+        """(N,) the events of ``robots``, robot by robot, each robot's in path order."""
+        return np.concatenate(
+            [np.arange(self.event_start[r], self.event_start[r + 1]) for r in robots]
+        )
 
     def pick(self, rng: np.random.Generator, delay: np.ndarray, count: int) -> np.ndarray:
         """``count`` robots (fewer if the seed's conflict component is smaller): a seed
@@ -205,11 +238,12 @@ class _Neighbourhood:
         model = cp_model.CpModel()
         m = problem.n_conflicts
 
+        events = fleet.events_of(robots)  # (N,) the picked robots' events, by robot
+
         # Variables: the picked robots' delays, the freed conflicts' literals.
         delay: list = grid_delay.tolist()  # held robots' delays stay integers
-        for r in robots.tolist():
-            for e in range(fleet.event_start[r], fleet.event_start[r + 1]):
-                delay[e] = model.new_int_var(0, fleet.horizon, f"delay_{e}")
+        for e in events.tolist():
+            delay[e] = model.new_int_var(0, fleet.horizon, f"delay_{e}")
         a_lit: list = [None] * m
         f_lit: list = [None] * m
         for c in self.conflicts.tolist():
@@ -224,32 +258,25 @@ class _Neighbourhood:
         )
         # Hint: the current answer (add_hint first: it clears earlier hints).
         self.em.add_hint(Assignments.single(a_first[self.conflicts], following[self.conflicts]))
-        for r in robots.tolist():
-            for e in range(fleet.event_start[r], fleet.event_start[r + 1]):
-                model.add_hint(delay[e], int(grid_delay[e]))
+        add_hints(model, [delay[e] for e in events.tolist()], grid_delay[events].tolist())
 
         # Constraints.
         self._fix(ctx, a_lit, f_lit)
         self._order(ctx, robots, a_lit, current)
         self._budgets(ctx, current, f_lit)
-        for r in robots.tolist():
-            for e in range(fleet.event_start[r] + 1, fleet.event_start[r + 1]):
-                model.add(delay[e] >= delay[e - 1])
+        for e in events[~np.isin(events, fleet.event_start[robots])].tolist():
+            model.add(delay[e] >= delay[e - 1])  # along each robot's path
         live = self.conflicts[~problem.realized[self.conflicts]]
         add_waits(model, time_slots(problem, fleet.ti, a_lit, f_lit, live), delay)
 
         # Objective: the picked robots' part (the held robots' is a constant).
         if ctx.objective == "avg_completion":
             last = problem.tp_event[problem.last_tp[robots]]
-            model.minimize(sum(delay[e] for e in last.tolist()))
+            model.minimize(cp_model.LinearExpr.sum([delay[e] for e in last.tolist()]))
         else:  # avg_delay
-            weights = fleet.delay_weight
+            weights = fleet.delay_weight[events]
             model.minimize(
-                sum(
-                    int(weights[e]) * delay[e]
-                    for r in robots.tolist()
-                    for e in range(fleet.event_start[r], fleet.event_start[r + 1])
-                )
+                cp_model.LinearExpr.weighted_sum([delay[e] for e in events.tolist()], weights)
             )
 
     def _fix(self, ctx: SolveContext, a_lit: list, f_lit: list) -> None:
@@ -283,10 +310,8 @@ class _Neighbourhood:
         )
         nodes = np.flatnonzero(boundary | picked_node)  # (N,)
         order = np.argsort(np.argsort(current.rank[nodes]))  # (N,) hint: the current order
-        pos: dict[int, cp_model.IntVar] = {}
-        for v, hint in zip(nodes.tolist(), order.tolist(), strict=True):
-            pos[v] = model.new_int_var(0, nodes.size - 1, f"pos_{v}")
-            model.add_hint(pos[v], hint)
+        pos = {v: model.new_int_var(0, nodes.size - 1, f"pos_{v}") for v in nodes.tolist()}
+        add_hints(model, list(pos.values()), order.tolist())
         for r in robots.tolist():
             for v in range(p.robot_start[r] + 1, p.robot_start[r + 1]):
                 model.add(pos[v] >= pos[v - 1] + 1)
@@ -413,24 +438,38 @@ def lns_search(
     fleet = _Fleet.of(ctx)
     rng = np.random.default_rng(seed)
     best, current = start, _Incumbent.start(ctx, fleet, start)
-    steps = 0
+    steps = stalled = 0
+    count = LNS_ROBOTS
     while deadline - time.monotonic() > MIN_STEP_S:
-        robots = fleet.pick(rng, current.delay, LNS_ROBOTS)
+        if stalled * count >= STALL_COVER * ctx.problem.n_robots:
+            count, stalled = min(int(count * GROWTH) + 1, MAX_ROBOTS), 0
+        robots = fleet.pick(rng, current.delay, count)
         neighbourhood = _Neighbourhood(ctx, fleet, robots, current)
         left = deadline - time.monotonic()
         if left <= 0:
             break
         found = neighbourhood.solve(current, min(SUB_TIME_S, left), seed + steps)
         steps += 1
-        if found is None:
-            continue
-        rank = ctx.orientation.topological_rank(found.a_first[0])
-        if rank is None:  # a guard: the sub-problem excludes cycles
-            continue
-        evaluation = ctx.evaluator.evaluate(found)
-        if float(evaluation.costs[ctx.objective][0]) < current.cost:
-            best, current = found, _Incumbent.of(ctx, fleet, found, rank, evaluation)
+        better = None if found is None else _cheaper(ctx, fleet, current, found)
+        if better is None:
+            stalled += 1
+        else:
+            best, current, stalled = found, better, 0
     return best, current.cost, steps
+
+
+def _cheaper(
+    ctx: SolveContext, fleet: _Fleet, current: _Incumbent, found: Assignments
+) -> _Incumbent | None:
+    """``found`` as the new incumbent if the evaluator finds it cheaper (None otherwise, and,
+    as a guard, if its node graph closes a cycle: the sub-problem excludes cycles)."""
+    rank = ctx.orientation.topological_rank(found.a_first[0])
+    if rank is None:
+        return None
+    evaluation = ctx.evaluator.evaluate(found)
+    if float(evaluation.costs[ctx.objective][0]) >= current.cost:
+        return None
+    return _Incumbent.of(ctx, fleet, found, rank, evaluation)
 
 
 @register("lns")

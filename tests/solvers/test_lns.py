@@ -126,6 +126,29 @@ def test_freeing_every_robot_reaches_the_brute_force_optimum(
     assert cost == pytest.approx(best, rel=1e-6, abs=1e-9)
 
 
+def test_a_plateau_grows_the_neighbourhood(monkeypatch: pytest.MonkeyPatch) -> None:
+    """With no sub-problem ever improving, each size is tried until the robots freed cover
+    the fleet, then it grows by GROWTH up to MAX_ROBOTS."""
+    ctx = _context(_conformance("wh_50")["request"], "avg_completion")
+    counts: list[int] = []
+    pick = lns._Fleet.pick
+
+    def recorded(fleet: lns._Fleet, rng: np.random.Generator, delay: np.ndarray, count: int):
+        counts.append(count)
+        return pick(fleet, rng, delay, count)
+
+    monkeypatch.setattr(lns._Fleet, "pick", recorded)
+    monkeypatch.setattr(lns._Neighbourhood, "solve", lambda *args: None)
+    lns.lns_search(ctx, plain_start(ctx), time.monotonic() + 0.5, 0)
+    n = ctx.problem.n_robots
+    expected, size = [], lns.LNS_ROBOTS
+    while len(expected) < len(counts):
+        expected += [size] * -(-n // size)  # ceil(n / size) steps cover the fleet
+        size = min(int(size * lns.GROWTH) + 1, lns.MAX_ROBOTS)
+    assert len(set(counts)) >= 3  # it grew at least twice within the time
+    assert counts == expected[: len(counts)]
+
+
 def test_lns_ends_at_its_deadline_with_a_valid_answer() -> None:
     ctx = _context(_conformance("wh_50")["request"], "avg_completion")
     start = plain_start(ctx)
