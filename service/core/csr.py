@@ -6,7 +6,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["csr"]
+__all__ = ["csr", "gather"]
 
 
 def csr(keys: np.ndarray, values: np.ndarray, n_keys: int) -> tuple[np.ndarray, np.ndarray]:
@@ -20,6 +20,17 @@ def csr(keys: np.ndarray, values: np.ndarray, n_keys: int) -> tuple[np.ndarray, 
     np.cumsum(np.bincount(keys, minlength=n_keys), out=start[1:])
     keys = np.asarray(keys, dtype=np.int64)
     return start, _grouped(keys, np.asarray(values, dtype=np.int64), start)
+
+
+def gather(
+    start: np.ndarray, values: np.ndarray, keys: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The rows of ``keys`` -> (their values, row after row (N,), the key of each (N,))."""
+    keys = np.asarray(keys, dtype=np.int64)
+    lengths = start[keys + 1] - start[keys]  # (K,)
+    first = np.cumsum(lengths) - lengths  # (K,) each row's first place in the output
+    within = np.arange(int(lengths.sum())) - np.repeat(first, lengths)  # (N,)
+    return values[np.repeat(start[keys], lengths) + within], np.repeat(keys, lengths)
 
 
 @numba.njit(cache=True, nogil=True)

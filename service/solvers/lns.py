@@ -54,7 +54,7 @@ from ortools.sat.python import cp_model
 from scipy.sparse import coo_array, csr_array
 
 from service.core.assignment import Assignments
-from service.core.csr import csr
+from service.core.csr import csr, gather
 from service.core.evaluate import Evaluation, Evaluator
 from service.core.orientation import _leads_to
 from service.solvers.exact import (
@@ -124,6 +124,7 @@ class _Fleet:
     horizon: int
     grid: Evaluator  # least delays of the grid-rounded problem
     delay_weight: np.ndarray  # (E,) int weight of each event's delay in avg_delay
+    binding: np.ndarray  # (Q,) bool cliques whose budget can bind
 
     @classmethod
     def of(cls, ctx: SolveContext) -> _Fleet:
@@ -148,12 +149,12 @@ class _Fleet:
             horizon,
             grid,
             delay_weights(p),
+            ctx.cliques.binding(),
         )
 
     def conflicts_of(self, robots: np.ndarray) -> np.ndarray:
         """(K,) sorted distinct conflicts any of ``robots`` takes part in."""
-        start, conflicts = self.robot_conflicts
-        return np.unique(np.concatenate([conflicts[start[r] : start[r + 1]] for r in robots]))
+        return np.unique(gather(*self.robot_conflicts, robots)[0])
 
     def events_of(self, robots: np.ndarray) -> np.ndarray:
         """(N,) the events of ``robots``, robot by robot, each robot's in path order."""
@@ -263,7 +264,7 @@ class _Neighbourhood:
         # Constraints.
         self._fix(ctx, a_lit, f_lit)
         self._order(ctx, robots, a_lit, current)
-        self._budgets(ctx, current, f_lit)
+        self._budgets(ctx, fleet, current, f_lit)
         for e in events[~np.isin(events, fleet.event_start[robots])].tolist():
             model.add(delay[e] >= delay[e - 1])  # along each robot's path
         live = self.conflicts[~problem.realized[self.conflicts]]
@@ -282,14 +283,16 @@ class _Neighbourhood:
     def _fix(self, ctx: SolveContext, a_lit: list, f_lit: list) -> None:
         """Fixed directions and types, and no following type in a zero-budget clique."""
         p, model = ctx.problem, self.em.model
-        forbidden = ~ctx.orientation.may_follow
-        for c in self.conflicts.tolist():
-            if p.forced[c] != 0:
-                model.add(a_lit[c] == int(p.forced[c] > 0))
-            if p.fixed_type[c] >= 0:
-                model.add(f_lit[c] == int(p.fixed_type[c]))
-            elif forbidden[c]:
-                model.add(f_lit[c] == 0)
+        conflicts = self.conflicts
+        forced = p.forced[conflicts]  # (K,) +1 a first, -1 b first, 0 free
+        for c, a_first in zip(
+            conflicts[forced != 0].tolist(), forced[forced != 0] > 0, strict=True
+        ):
+            model.add(a_lit[c] == int(a_first))
+        fixed = p.fixed_type[conflicts]  # (K,) 1 following, 0 exclusive, -1 free
+        fixed = np.where((fixed < 0) & ~ctx.orientation.may_follow[conflicts], 0, fixed)
+        for c, kind in zip(conflicts[fixed >= 0].tolist(), fixed[fixed >= 0].tolist(), strict=True):
+            model.add(f_lit[c] == kind)
 
     def _order(
         self, ctx: SolveContext, robots: np.ndarray, a_lit: list, current: _Incumbent
@@ -322,20 +325,20 @@ class _Neighbourhood:
             model.add(pos[b] >= pos[a] + 1).only_enforce_if(a_lit[c])
             model.add(pos[a] >= pos[b] + 1).only_enforce_if(a_lit[c].Not())
 
-    def _budgets(self, ctx: SolveContext, current: _Incumbent, f_lit: list) -> None:
+    def _budgets(self, ctx: SolveContext, fleet: _Fleet, current: _Incumbent, f_lit: list) -> None:
         """At most what its held conflicts leave of each binding clique's budget."""
-        cliques, graph, model = ctx.cliques, ctx.orientation, self.em.model
-        following, size = current.following, cliques.size
-        members: dict[int, list[int]] = {}
-        for c in self.conflicts.tolist():
-            for q in graph.cq_clique[graph.cq_start[c] : graph.cq_start[c + 1]].tolist():
-                members.setdefault(q, []).append(c)
-        for q, freed in members.items():
-            budget = int(cliques.budget[q])
-            if budget <= 0 or budget >= size[q]:
-                continue  # forbidden (see _fix) or never binding
-            held = int(current.counts[q]) - int(following[freed].sum())
-            model.add(sum(f_lit[c] for c in freed) <= budget - held)
+        cliques, graph = ctx.cliques, ctx.orientation
+        clique, conflict = gather(graph.cq_start, graph.cq_clique, self.conflicts)  # (N,) pairs
+        binding = fleet.binding[clique]  # others: forbidden (see _fix) or never binding
+        order = np.argsort(clique[binding], kind="stable")
+        clique, conflict = clique[binding][order], conflict[binding][order]
+        touched, first = np.unique(clique, return_index=True)  # (T,)
+        if touched.size == 0:
+            return
+        freed_following = np.add.reduceat(current.following[conflict].astype(np.int64), first)
+        room = cliques.budget[touched] - (current.counts[touched] - freed_following)  # (T,)
+        for freed, left in zip(np.split(conflict, first[1:]), room.tolist(), strict=True):
+            self.em.model.add(cp_model.LinearExpr.sum([f_lit[c] for c in freed.tolist()]) <= left)
 
     def solve(self, current: _Incumbent, time_limit_s: float, seed: int) -> Assignments | None:
         """The current answer with the freed conflicts as CP-SAT decides them (None if it

@@ -21,7 +21,7 @@ from service.core.cliques import (
     clique_budget,
     find_cliques,
 )
-from service.core.csr import csr
+from service.core.csr import csr, gather
 from service.core.problem import Problem, problem_from_request
 from service.core.schemas import ScheduleRequest
 from service.learning.generate import small_problem
@@ -204,6 +204,19 @@ def test_csr_groups_values_by_key_stably(keys: list[int]) -> None:
     counts = np.bincount(key, minlength=7)
     assert start.tolist() == np.concatenate([[0], np.cumsum(counts)]).tolist()
     assert grouped.tolist() == (np.argsort(key, kind="stable") * 10).tolist()
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(
+    keys=st.lists(st.integers(0, 6), max_size=80),
+    rows=st.lists(st.integers(0, 6), max_size=10),
+)
+def test_gather_reads_the_rows_of_the_keys_asked_for(keys: list[int], rows: list[int]) -> None:
+    key = np.array(keys, dtype=np.int64)
+    start, grouped = csr(key, np.arange(key.size) * 10, 7)
+    values, owner = gather(start, grouped, np.array(rows, dtype=np.int64))
+    expected = [(v, r) for r in rows for v in grouped[start[r] : start[r + 1]].tolist()]
+    assert list(zip(values.tolist(), owner.tolist(), strict=True)) == expected
 
 
 def test_find_cliques_names_the_bound_it_exceeds() -> None:
