@@ -97,6 +97,9 @@ class Variant:
 
 
 _INTERLEAVE = (("interleave_search", True),)
+# CP-SAT's root-level transitive closure of precedences (linear2 bounds), redone at
+# every new root bound: most of a sub-problem's search time in a profile (session 19).
+_NO_TRANSITIVE = (("transitive_precedences_work_limit", 0),)
 VARIANTS: dict[str, Variant] = {
     "default": Variant("1 worker, linearization 1, FCFS hint: the service's exact before"),
     "no_hint": Variant("no hint", hint=NO_HINT),
@@ -137,6 +140,19 @@ VARIANTS: dict[str, Variant] = {
         linearization=0,
         probing=1,
         hint=STAGE,
+    ),
+    "lin0_probe0_trans0": Variant(
+        "linearization 0, no probing, no transitive precedences",
+        linearization=0,
+        probing=0,
+        tuning=_NO_TRANSITIVE,
+    ),
+    "stage_lin0_probe0_trans0": Variant(
+        "stage hint, linearization 0, no probing, no transitive precedences",
+        linearization=0,
+        probing=0,
+        hint=STAGE,
+        tuning=_NO_TRANSITIVE,
     ),
     "w2": Variant("2 workers", workers=2),
     "w2_lns": Variant("2 workers, LNS only", workers=2, tuning=(("use_lns_only", True),)),
