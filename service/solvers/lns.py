@@ -435,16 +435,20 @@ def _without_shortcuts(
 
 
 def lns_search(
-    ctx: SolveContext, start: Assignments, deadline: float, seed: int
+    ctx: SolveContext, start: Assignments, deadline: float, seed: int, converge: bool = False
 ) -> tuple[Assignments, float, int]:
-    """LNS from the valid ``start`` until ``deadline`` (monotonic) -> (best, its cost, steps)."""
+    """LNS from the valid ``start`` until ``deadline`` (monotonic), or with ``converge``
+    until a plateau at the largest neighbourhood (min(MAX_ROBOTS, fleet)) -> (best, its
+    cost, steps)."""
     fleet = _Fleet.of(ctx)
     rng = np.random.default_rng(seed)
     best, current = start, _Incumbent.start(ctx, fleet, start)
     steps = stalled = 0
-    count = LNS_ROBOTS
+    count, largest = LNS_ROBOTS, min(MAX_ROBOTS, ctx.problem.n_robots)
     while deadline - time.monotonic() > MIN_STEP_S:
         if stalled * count >= STALL_COVER * ctx.problem.n_robots:
+            if converge and count >= largest:
+                break
             count, stalled = min(int(count * GROWTH) + 1, MAX_ROBOTS), 0
         robots = fleet.pick(rng, current.delay, count)
         neighbourhood = _Neighbourhood(ctx, fleet, robots, current)

@@ -208,3 +208,35 @@ def test_auto_keeps_cp_sat_for_the_objectives_lns_does_not_search() -> None:
     assert answer.solver.name == "auto"
     assert "LNS" not in (answer.solver.detail or "")
     assert answer.checks.acyclic and answer.checks.density
+
+
+def test_below_its_threshold_auto_runs_lns_then_cp_sat_and_still_proves(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Below lns_min_conflicts LNS stops at a plateau of its largest neighbourhood (or
+    its share of the time) and hands its answer to the CP-SAT stage, which proves it."""
+    import service.solvers.portfolio as portfolio
+
+    ran: list[str] = []
+
+    def converging(*args: object, **kwargs: object) -> object:
+        ran.append("lns" if kwargs.get("converge") else "lns to the deadline")
+        return lns.lns_search(*args, **kwargs)
+
+    def cp_sat(*args: object, **kwargs: object) -> object:
+        ran.append("cp-sat")
+        return portfolio_improve(*args, **kwargs)
+
+    portfolio_improve = portfolio.improve
+    monkeypatch.setattr(portfolio, "lns_search", converging)
+    monkeypatch.setattr(portfolio, "improve", cp_sat)
+    line = _conformance("wh_25")
+    body = {**line["request"], "options": {"solver": "auto", "time_limit_s": 5.0}}
+    policy = DispatchPolicy(exact_max_conflicts=0, lns_min_conflicts=10**9)
+    begin = time.perf_counter()
+    answer = dispatch(ScheduleRequest.model_validate(body), policy)
+    assert time.perf_counter() - begin < 5.0  # proven before the deadline
+    assert ran[0] == "lns" and ran[-1] == "cp-sat"
+    assert answer.solver.optimal
+    assert answer.cost == pytest.approx(line["ref_cost"], rel=1e-6)
+    assert answer.checks.acyclic and answer.checks.density
