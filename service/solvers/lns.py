@@ -47,6 +47,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, replace
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -70,7 +71,7 @@ from service.solvers.exact import (
 from service.solvers.registry import SolveContext, SolverOutput, register
 from service.solvers.tabu import plain_start
 
-__all__ = ["LNS_OBJECTIVES", "LNS_ROBOTS", "SUB_TIME_S", "lns_search"]
+__all__ = ["LNS_OBJECTIVES", "LNS_ROBOTS", "SUB_TIME_S", "LnsResult", "lns_search"]
 
 # Objectives a neighbourhood's part of the cost stands for (sums over robots).
 LNS_OBJECTIVES = ("avg_completion", "avg_delay")
@@ -340,16 +341,18 @@ class _Neighbourhood:
         for freed, left in zip(np.split(conflict, first[1:]), room.tolist(), strict=True):
             self.em.model.add(cp_model.LinearExpr.sum([f_lit[c] for c in freed.tolist()]) <= left)
 
-    def solve(self, current: _Incumbent, time_limit_s: float, seed: int) -> Assignments | None:
-        """The current answer with the freed conflicts as CP-SAT decides them (None if it
-        found nothing within the limit)."""
+    def solve(
+        self, current: _Incumbent, time_limit_s: float, seed: int
+    ) -> tuple[Assignments, bool] | None:
+        """The current answer with the freed conflicts as CP-SAT decides them, and whether
+        CP-SAT proved them optimal (None if it found nothing within the limit)."""
         result = search(self.em, time_limit_s, seed, tuning=SUB_TUNING)
         if result is None:
             return None
         a_first, following = current.a_first.copy(), current.following.copy()
         a_first[self.conflicts] = result.assignment.a_first[0]
         following[self.conflicts] = result.assignment.following[0]
-        return Assignments(a_first[None], following[None])
+        return Assignments(a_first[None], following[None]), result.optimal
 
 
 @numba.njit(cache=True)
@@ -434,12 +437,22 @@ def _without_shortcuts(
     return tails[keep], heads[keep]
 
 
+class LnsResult(NamedTuple):
+    """What a search ended with: the best answer, its cost, the steps taken, and whether it
+    is proven optimal (a step that freed every robot, proven by CP-SAT)."""
+
+    best: Assignments
+    cost: float
+    steps: int
+    optimal: bool
+
+
 def lns_search(
     ctx: SolveContext, start: Assignments, deadline: float, seed: int, converge: bool = False
-) -> tuple[Assignments, float, int]:
+) -> LnsResult:
     """LNS from the valid ``start`` until ``deadline`` (monotonic), or with ``converge``
-    until a plateau at the largest neighbourhood (min(MAX_ROBOTS, fleet)) -> (best, its
-    cost, steps)."""
+    until a plateau at the largest neighbourhood (min(MAX_ROBOTS, fleet)); at once when a
+    step that freed every robot (the whole problem, nothing held) is proven optimal."""
     fleet = _Fleet.of(ctx)
     rng = np.random.default_rng(seed)
     best, current = start, _Incumbent.start(ctx, fleet, start)
@@ -455,26 +468,31 @@ def lns_search(
         left = deadline - time.monotonic()
         if left <= 0:
             break
-        found = neighbourhood.solve(current, min(SUB_TIME_S, left), seed + steps)
+        solved = neighbourhood.solve(current, min(SUB_TIME_S, left), seed + steps)
         steps += 1
-        better = None if found is None else _cheaper(ctx, fleet, current, found)
+        proven = solved is not None and solved[1] and robots.size == ctx.problem.n_robots
+        better = None if solved is None else _cheaper(ctx, fleet, current, solved[0], proven)
         if better is None:
             stalled += 1
-        else:
-            best, current, stalled = found, better, 0
-    return best, current.cost, steps
+            continue
+        best, current, stalled = solved[0], better, 0
+        if proven:
+            return LnsResult(best, current.cost, steps, True)
+    return LnsResult(best, current.cost, steps, False)
 
 
 def _cheaper(
-    ctx: SolveContext, fleet: _Fleet, current: _Incumbent, found: Assignments
+    ctx: SolveContext, fleet: _Fleet, current: _Incumbent, found: Assignments, ties: bool
 ) -> _Incumbent | None:
-    """``found`` as the new incumbent if the evaluator finds it cheaper (None otherwise, and,
-    as a guard, if its node graph closes a cycle: the sub-problem excludes cycles)."""
+    """``found`` as the new incumbent if the evaluator finds it cheaper (or, with ``ties``,
+    as cheap; None otherwise, and, as a guard, if its node graph closes a cycle: the
+    sub-problem excludes cycles)."""
     rank = ctx.orientation.topological_rank(found.a_first[0])
     if rank is None:
         return None
     evaluation = ctx.evaluator.evaluate(found)
-    if float(evaluation.costs[ctx.objective][0]) >= current.cost:
+    cost = float(evaluation.costs[ctx.objective][0])
+    if cost > current.cost or (cost == current.cost and not ties):
         return None
     return _Incumbent.of(ctx, fleet, found, rank, evaluation)
 
@@ -487,5 +505,8 @@ def lns(ctx: SolveContext) -> SolverOutput:
     start = plain_start(ctx)
     if ctx.objective not in LNS_OBJECTIVES:
         return SolverOutput(start, detail=f"no LNS for {ctx.objective}")
-    best, _, steps = lns_search(ctx, start, deadline, ctx.seed)
-    return SolverOutput(best, detail=f"{steps} LNS steps")
+    found = lns_search(ctx, start, deadline, ctx.seed)
+    verdict = "; proven optimal (every robot freed)" if found.optimal else ""
+    return SolverOutput(
+        found.best, optimal=found.optimal, detail=f"{found.steps} LNS steps{verdict}"
+    )

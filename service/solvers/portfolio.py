@@ -17,8 +17,10 @@ comes first, improving in stages:
    a few robots at a time from the best answer so far (:mod:`service.solvers.lns`).
    From ``lns_min_conflicts`` conflicts until the deadline, instead of the next
    stage: on whole models of this size one CP-SAT worker barely moves from its
-   hint. Below, until it converges (a plateau at its largest neighbourhood) or
-   MID_LNS_SHARE of the time left has passed, then
+   hint. Below, until it converges (a plateau at its largest neighbourhood),
+   proves optimality (a step that freed every robot of a fleet of at most
+   ``lns.MAX_ROBOTS``, proven by CP-SAT) or MID_LNS_SHARE of the time left has
+   passed, then
 4. **exact**: CP-SAT hinted with the best answer so far, for the rest of the
    budget; it proves optimality where it can (``solver.optimal`` is true only
    then) and never returns worse than its hint (the cheaper is kept, by the one
@@ -152,12 +154,14 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
         until = (
             deadline if last else min(deadline - left * (1 - MID_LNS_SHARE), deadline - exact_min_s)
         )
-        found_lns, found_cost, steps = lns_search(
-            ctx, best.assignment, until, ctx.seed, converge=not last
-        )
-        if found_cost < cost:
-            best, cost = replace(best, assignment=found_lns), found_cost
+        found = lns_search(ctx, best.assignment, until, ctx.seed, converge=not last)
+        steps = found.steps
+        if found.cost < cost or found.optimal:
+            best, cost = replace(best, assignment=found.best), found.cost
             stages.append(f"lns x{steps}")
+        if found.optimal:
+            verdict = "proven optimal by LNS (every robot freed)"
+            return replace(best, optimal=True, detail=_detail(stages, verdict))
         if last:
             verdict = (
                 f"no CP-SAT stage from {ctx.lns_min_conflicts} conflicts ({steps} LNS steps)"
