@@ -241,6 +241,7 @@ def test_below_its_threshold_auto_runs_lns_then_cp_sat_and_still_proves(
     import service.solvers.portfolio as portfolio
 
     ran: list[str] = []
+    portfolio_improve = portfolio.improve
 
     def converging(*args: object, **kwargs: object) -> object:
         ran.append("lns" if kwargs.get("converge") else "lns to the deadline")
@@ -250,7 +251,6 @@ def test_below_its_threshold_auto_runs_lns_then_cp_sat_and_still_proves(
         ran.append("cp-sat")
         return portfolio_improve(*args, **kwargs)
 
-    portfolio_improve = portfolio.improve
     monkeypatch.setattr(portfolio, "lns_search", converging)
     monkeypatch.setattr(portfolio, "improve", cp_sat)
     if not whole_fleet:
