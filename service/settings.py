@@ -59,7 +59,9 @@ class Settings(BaseSettings):
     # (session 18, 5 s, against the better answer): generated 50-robot worlds of 806-901
     # conflicts 0.81-0.98 -> 1.00, of 515-575 conflicts mixed (two worse by 1-5 %, one
     # better); 100-robot warehouses 0.76-0.79 -> 0.85-0.89 at 5 s (avg_delay: LNS better on
-    # all six), docs/benchmarks.md "Large-neighbourhood search".
+    # all six), docs/benchmarks.md "Large-neighbourhood search". Below it (and above
+    # exact_max_conflicts) LNS runs until it converges and the CP-SAT stage follows
+    # (session 19, portfolio.MID_LNS_SHARE).
     lns_min_conflicts: int = Field(default=700, ge=0)
     # ``auto``'s first stage above exact_max_conflicts. Measured (2026-11-24, bench.anytime,
     # auto with tabu from the blended start vs with gnn_vae_refined, cost ratio against
