@@ -159,9 +159,7 @@ class _Fleet:
 
     def events_of(self, robots: np.ndarray) -> np.ndarray:
         """(N,) the events of ``robots``, robot by robot, each robot's in path order."""
-        return np.concatenate(
-            [np.arange(self.event_start[r], self.event_start[r + 1]) for r in robots]
-        )
+        return gather(self.event_start, np.arange(self.event_start[-1]), robots)[0]
 
     def pick(self, rng: np.random.Generator, delay: np.ndarray, count: int) -> np.ndarray:
         """``count`` robots (fewer if the seed's conflict component is smaller): a seed
