@@ -213,8 +213,8 @@ def bound_by(em: ExactModel, incumbent: Assignments, time_limit_s: float) -> boo
     """
     fixed = em.model.clone()
     values = [*incumbent.a_first[0].tolist(), *incumbent.following[0].tolist()]
-    for lit, val in zip([*em.a_first, *em.following], values, strict=True):
-        fixed.add(fixed.get_bool_var_from_proto_index(lit.index) == int(val))
+    for lit, val in zip([*em.a_first.tolist(), *em.following.tolist()], values, strict=True):
+        fixed.add(fixed.get_bool_var_from_proto_index(lit) == int(val))
     solver = cp_model.CpSolver()
     solver.parameters.max_time_in_seconds = max(time_limit_s, MIN_SEARCH_S)
     solver.parameters.cp_model_presolve = False

@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -48,15 +48,33 @@ from ortools.sat.python import cp_model
 
 from service.core.assignment import Assignments
 from service.core.cliques import Cliques
+from service.core.csr import csr, gather
 from service.core.problem import Problem
 from service.core.schemas import Objective
+from service.solvers.cpsat_arrays import (
+    INT64_MAX,
+    INT64_MIN,
+    add_clauses,
+    add_hints,
+    add_linear,
+    add_max,
+    add_sums,
+    minimize,
+    negated,
+    new_vars,
+    solution_of,
+)
 from service.solvers.fcfs import fcfs
 from service.solvers.registry import SolveContext, SolverOutput, register
 
 __all__ = [
+    "Delays",
     "ExactModel",
     "ExactResult",
+    "Slots",
     "Tuning",
+    "add_conflict_order",
+    "add_path_order",
     "add_waits",
     "build_model",
     "build_seconds",
@@ -64,6 +82,7 @@ __all__ = [
     "exact",
     "improve",
     "integer_times",
+    "literal_domains",
     "search",
     "solve",
     "time_slots",
@@ -111,11 +130,11 @@ DTIME_PER_S = 0.09
 
 @dataclass(eq=False)
 class ExactModel:
-    """A built CP-SAT model with handles to its decision literals."""
+    """A built CP-SAT model with the proto indices of its decision literals."""
 
     model: cp_model.CpModel
-    a_first: list[cp_model.IntVar]  # (M,)
-    following: list[cp_model.IntVar]  # (M,)
+    a_first: np.ndarray  # (M,) int64
+    following: np.ndarray  # (M,) int64
     scale: float
     linearization: int  # the LP relaxation level its objective searches best with
 
@@ -126,39 +145,46 @@ class ExactModel:
     def add_hint(self, assignments: Assignments) -> None:
         """Hint the first assignment of the batch (replacing earlier hints)."""
         self.model.clear_hints()
-        add_hints(self.model, self.a_first, assignments.a_first[0].tolist())
-        add_hints(self.model, self.following, assignments.following[0].tolist())
+        add_hints(self.model, self.a_first, assignments.a_first[0])
+        add_hints(self.model, self.following, assignments.following[0])
 
     def exclude(self, assignments: Assignments) -> None:
         """No-good: forbid exactly the first assignment of the batch."""
-        clause = [
-            lit.Not() if val else lit
-            for lits, vals in (
-                (self.a_first, assignments.a_first[0]),
-                (self.following, assignments.following[0]),
-            )
-            for lit, val in zip(lits, vals.tolist(), strict=True)
-        ]
-        self.model.add_bool_or(clause)
+        clause = np.concatenate(
+            [
+                np.where(values, negated(lits), lits)
+                for lits, values in (
+                    (self.a_first, assignments.a_first[0]),
+                    (self.following, assignments.following[0]),
+                )
+            ]
+        )
+        add_clauses(self.model, np.array([0, clause.size]), clause)
 
 
-def add_hints(
-    model: cp_model.CpModel, variables: Sequence[cp_model.IntVar], values: Sequence
-) -> None:
-    """Hint ``values`` for ``variables`` (not negated literals) with two calls on the model's
-    proto instead of one ``add_hint`` per variable: 0.2 ms instead of 7.6 ms for 2,000."""
-    hint = model.proto.solution_hint
-    hint.vars.extend([v.index for v in variables])
-    hint.values.extend([int(x) for x in values])
+@dataclass(frozen=True)
+class Delays:
+    """Each event's delay in a model: a variable, or a known integer (a robot whose times a
+    neighbourhood search holds, and the zero-delay slot E). Shapes (E+1,)."""
+
+    var: np.ndarray  # int64 proto index, -1 where the delay is known
+    known: np.ndarray  # int64 the delay where var is -1 (else the hint)
 
 
 # The least search time CP-SAT gets when building its model used up the time limit.
 MIN_SEARCH_S = 0.001
-# Building the model, measured: 36 ms at 262 conflicts, 2.5 s at 21,835 (~120 us each),
-# plus its density constraints: 0.25-0.57 s for 16,384-46,656 binding cliques holding
-# 327,680-708,588 conflicts (complete multipartite graphs), ~8 us per clique and
-# ~0.5 us per conflict in it.
-BUILD_S_PER_CONFLICT = 1.2e-4
+# Building the model, measured (session 20, constraints written from arrays, see
+# cpsat_arrays; 3 builds each, the slowest kept): 29-74 us per conflict for the objectives
+# bounded from below, 84-174 us for sync_completion (pinned delays) on generated worlds of
+# 515-21,835 conflicts (before: 70-113 us and 158-240 us); plus its density constraints:
+# 0.25-0.57 s for 16,384-46,656 binding cliques holding 327,680-708,588 conflicts (complete
+# multipartite graphs, measured before), ~8 us per clique and ~0.5 us per conflict in it.
+BUILD_S_PER_CONFLICT: dict[str, float] = {
+    "avg_completion": 8e-5,
+    "max_completion": 8e-5,
+    "sync_completion": 1.8e-4,
+    "avg_delay": 8e-5,
+}
 BUILD_S_PER_CLIQUE = 8e-6
 BUILD_S_PER_INCIDENCE = 5e-7
 
@@ -202,11 +228,11 @@ def integer_times(problem: Problem) -> tuple[float, np.ndarray, int]:
     return scale, ti, int(ti[first_tp].max() + (ti[last_tp] - ti[first_tp]).sum())
 
 
-def build_seconds(problem: Problem, cliques: Cliques) -> float:
+def build_seconds(problem: Problem, cliques: Cliques, objective: Objective) -> float:
     """About how long :func:`build_model` takes on this machine (measured rates above)."""
     binding = cliques.binding()
     return (
-        BUILD_S_PER_CONFLICT * problem.n_conflicts
+        BUILD_S_PER_CONFLICT[objective] * problem.n_conflicts
         + BUILD_S_PER_CLIQUE * int(binding.sum())
         + BUILD_S_PER_INCIDENCE * int(cliques.size[binding].sum())
     )
@@ -216,164 +242,233 @@ def build_model(problem: Problem, cliques: Cliques, objective: Objective) -> Exa
     """The CP-SAT model of ``problem`` for ``objective`` (see module doc)."""
     # Data.
     scale, ti, horizon = integer_times(problem)
-    n_events, tp_event, last_tp = problem.events.size, problem.tp_event, problem.last_tp
+    n_events, m = problem.events.size, problem.n_conflicts
     model = cp_model.CpModel()
-    m = problem.n_conflicts
 
-    # Variables.
-    a_first = [model.new_bool_var(f"a_first_{c}") for c in range(m)]
-    following = [model.new_bool_var(f"following_{c}") for c in range(m)]
-    delay = [model.new_int_var(0, horizon, f"delay_{e}") for e in range(n_events)]
-    delay.append(0)  # the zero-delay slot E
+    # Variables: the literals (fixed where a direction or a type is), the delays.
+    a_lo, a_hi, f_lo, f_hi = literal_domains(problem, cliques.forbidden())
+    a_first, following = new_vars(model, m, a_lo, a_hi), new_vars(model, m, f_lo, f_hi)
+    delays = Delays(
+        np.append(new_vars(model, n_events, 0, horizon), -1),  # the zero-delay slot E
+        np.zeros(n_events + 1, dtype=np.int64),
+    )
 
     # Constraints.
     _add_acyclicity(model, problem, a_first)
-    _fix_directions(model, problem, a_first, following)
     _add_density(model, cliques, following)
-    for e, nxt in enumerate(problem.event_next.tolist()):
-        if nxt >= 0:
-            model.add(delay[nxt] >= delay[e])
-    slots = time_slots(problem, ti, a_first, following, np.flatnonzero(~problem.realized))
-    add_waits(model, slots, delay)
+    add_path_order(model, delays.var, np.flatnonzero(problem.event_next >= 0))
+    slots = time_slots(problem, ti, np.flatnonzero(~problem.realized))
+    add_waits(model, slots, a_first, following, delays)
     if objective == "sync_completion":
-        _pin_delays(model, problem, delay, slots, horizon)
+        _pin_delays(model, problem, delays, slots, (a_first, following), horizon)
 
     # Objective.
-    completion = [int(ti[t]) + delay[tp_event[t]] for t in last_tp.tolist()]  # (R,) exprs
-    _set_objective(model, problem, objective, completion, delay, horizon + int(ti.max()))
+    _set_objective(model, problem, objective, ti, delays, horizon + int(ti.max()))
     return ExactModel(model, a_first, following, scale, LINEARIZATION_LEVEL[objective])
 
 
-def _add_acyclicity(model: cp_model.CpModel, problem: Problem, a_first: list) -> None:
+def literal_domains(
+    problem: Problem, forbidden: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(M,) domains (lo, hi) of the direction literals, then of the type literals: a fixed
+    direction fixes a_first (1 where ``forced`` is +1), a fixed type (a realized conflict of
+    a re-schedule) fixes following, and else a conflict of a zero-budget clique
+    (``forbidden`` (M,)) is exclusive."""
+    a_lo, a_hi = (problem.forced > 0).astype(np.int64), (problem.forced >= 0).astype(np.int64)
+    fixed = problem.fixed_type.astype(np.int64)
+    f_lo = np.where(fixed >= 0, fixed, 0)
+    f_hi = np.where(fixed >= 0, fixed, np.where(forbidden, 0, 1))
+    return a_lo, a_hi, f_lo, f_hi
+
+
+def _add_acyclicity(model: cp_model.CpModel, problem: Problem, a_first: np.ndarray) -> None:
     """Integer node positions, increasing along paths and along every conflict arc."""
-    n = problem.n_nodes
-    pos = [model.new_int_var(0, n - 1, f"pos_{v}") for v in range(n)]
-    for v in np.flatnonzero(problem.node_robot[1:] == problem.node_robot[:-1]).tolist():
-        model.add(pos[v + 1] >= pos[v] + 1)
-    for c, (a, b) in enumerate(zip(problem.conf_a.tolist(), problem.conf_b.tolist(), strict=True)):
-        model.add(pos[b] >= pos[a] + 1).only_enforce_if(a_first[c])
-        model.add(pos[a] >= pos[b] + 1).only_enforce_if(a_first[c].Not())
+    pos = new_vars(model, problem.n_nodes, 0, problem.n_nodes - 1)  # (V,)
+    along = np.flatnonzero(problem.node_robot[1:] == problem.node_robot[:-1])
+    add_linear(model, [pos[along + 1], pos[along]], [1, -1], 1, INT64_MAX)
+    add_conflict_order(model, pos[problem.conf_a], pos[problem.conf_b], a_first)
 
 
-def _fix_directions(
-    model: cp_model.CpModel, problem: Problem, a_first: list, following: list
+def add_conflict_order(
+    model: cp_model.CpModel, pos_a: np.ndarray, pos_b: np.ndarray, a_first: np.ndarray
 ) -> None:
-    """A fixed direction fixes its conflict's literal (side a first where forced is +1);
-    a fixed type (a realized conflict of a re-schedule) fixes its type literal."""
-    for c in problem.forced_arcs[0].tolist():
-        model.add(a_first[c] == int(problem.forced[c] > 0))
-    for c in np.flatnonzero(problem.fixed_type >= 0).tolist():
-        model.add(following[c] == int(problem.fixed_type[c]))
+    """Per conflict (K,): position of side b after side a's where a passes first (literal
+    ``a_first``), a's after b's where not. Shapes: position variables pos_a, pos_b (K,)."""
+    add_linear(model, [pos_b, pos_a], [1, -1], 1, INT64_MAX, [a_first])
+    add_linear(model, [pos_a, pos_b], [1, -1], 1, INT64_MAX, [negated(a_first)])
 
 
-def _add_density(model: cp_model.CpModel, cliques: Cliques, following: list) -> None:
-    """Conflicts of a zero-budget clique exclusive (once each), and at most h_K
-    following-type conflicts in each clique whose positive budget can bind."""
-    for c in np.flatnonzero(cliques.forbidden()).tolist():
-        model.add(following[c] == 0)
-    edge, start, budget = cliques.edge.tolist(), cliques.start.tolist(), cliques.budget.tolist()
-    for q in np.flatnonzero(cliques.binding()).tolist():
-        terms = [following[c] for c in edge[start[q] : start[q + 1]]]
-        model.add(cp_model.LinearExpr.sum(terms) <= budget[q])
+def add_path_order(model: cp_model.CpModel, delay: np.ndarray, events: np.ndarray) -> None:
+    """Delays never decrease along a path: ``delay[e + 1] >= delay[e]`` for ``events`` (N,)
+    whose next event is the same robot's. Shapes: delay (E+1,) variables."""
+    add_linear(model, [delay[events + 1], delay[events]], [1, -1], 0, INT64_MAX)
 
 
-def time_slots(
-    problem: Problem, ti: np.ndarray, a_first: Sequence, following: Sequence, conflicts: np.ndarray
-) -> list[tuple[int, list, int, int]]:
-    """(target event, enforcing literals, source event, integer offset) per time constraint
-    of the given conflicts (never realized ones: they only relate passed points), whose
-    literals ``a_first[c]`` and ``following[c]`` are looked up by conflict index.
+def _add_density(model: cp_model.CpModel, cliques: Cliques, following: np.ndarray) -> None:
+    """At most h_K following-type conflicts in each clique whose positive budget can bind
+    (a zero-budget clique's are exclusive by their domains, see :func:`literal_domains`)."""
+    binding = np.flatnonzero(cliques.binding())  # (B,)
+    conflicts, _ = gather(cliques.start, cliques.edge, binding)
+    start = np.concatenate([[0], np.cumsum(cliques.size[binding])])  # (B+1,)
+    add_sums(model, start, following[conflicts], INT64_MIN, cliques.budget[binding])
 
-    Each conflict gives four: for each side passing second, a following-level
-    wait (when the other side passes first) and an exclusive-level wait (when it
-    also is exclusive-type).
-    """
+
+@dataclass(frozen=True)
+class Slots:
+    """The time constraints of some conflicts, one row each: ``delay[target] >=
+    delay[source] + offset`` when the conflict's direction literal equals ``a_first``
+    and, where ``exclusive``, its type is exclusive. Shapes (S,)."""
+
+    conflict: np.ndarray  # int64
+    a_first: np.ndarray  # bool
+    exclusive: np.ndarray  # bool
+    target: np.ndarray  # int64 event
+    source: np.ndarray  # int64 event (or E)
+    offset: np.ndarray  # int64
+
+    def literals(self, a_first: np.ndarray, following: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(S,) each row's direction literal and (S,) its exclusive-type literal (used
+        where ``exclusive``), from the (M,) literal indices of the conflicts."""
+        lits = a_first[self.conflict]
+        return np.where(self.a_first, lits, negated(lits)), negated(following[self.conflict])
+
+
+def time_slots(problem: Problem, ti: np.ndarray, conflicts: np.ndarray) -> Slots:
+    """The time constraints of ``conflicts`` (K,) (never realized ones: they only relate
+    passed points), four each: for each side passing second, a following-level wait (when
+    the other side passes first) and an exclusive-level wait (when it also is
+    exclusive-type). Times ``ti`` (P,) on the integer grid."""
     enter, leave = problem.tp_pair_enter[conflicts], problem.tp_pair_exit[conflicts]  # (K, 2)
     # The four slots' columns: a second (after b's entry, then exit), b second (after a's).
     target_tp = enter[:, [0, 0, 1, 1]]  # (K, 4)
     source_tp = np.stack([enter[:, 1], leave[:, 1], enter[:, 0], leave[:, 0]], axis=1)
-    target, source = problem.tp_event[target_tp].tolist(), problem.tp_event[source_tp].tolist()
-    offset = (ti[source_tp] - ti[target_tp]).tolist()
-    slots = []
-    for k, c in enumerate(conflicts.tolist()):
-        a_lit, exclusive = a_first[c], following[c].Not()
-        b_lit = a_lit.Not()  # b passes first
-        t, s, o = target[k], source[k], offset[k]
-        slots += [
-            (t[0], [b_lit], s[0], o[0]),
-            (t[1], [b_lit, exclusive], s[1], o[1]),
-            (t[2], [a_lit], s[2], o[2]),
-            (t[3], [a_lit, exclusive], s[3], o[3]),
-        ]
-    return slots
+    k = conflicts.size
+    return Slots(
+        np.repeat(conflicts, 4),
+        np.tile([False, False, True, True], k),
+        np.tile([False, True, False, True], k),
+        problem.tp_event[target_tp].ravel(),
+        problem.tp_event[source_tp].ravel(),
+        (ti[source_tp] - ti[target_tp]).ravel(),
+    )
 
 
 def add_waits(
-    model: cp_model.CpModel, slots: list[tuple[int, list, int, int]], delay: Sequence
+    model: cp_model.CpModel,
+    slots: Slots,
+    a_first: np.ndarray,
+    following: np.ndarray,
+    delays: Delays,
 ) -> None:
-    """Each slot as ``delay[target] >= delay[src] + offset`` under its literals.
+    """Each slot as a constraint under its literals (``a_first``, ``following`` (M,) literal
+    indices): between two delay variables an enforced inequality; with one side known a
+    bound on the other (dropped where it waits for nothing: delays are never negative);
+    between two known delays nothing where it holds, else a clause forbidding its
+    literals."""
+    direction, exclusive = slots.literals(a_first, following)  # (S,) each
+    target_var, source_var = delays.var[slots.target], delays.var[slots.source]
+    target_known, source_known = delays.known[slots.target], delays.known[slots.source]
+    after = source_known + slots.offset  # (S,) least target delay behind a known source
+    before = target_known - slots.offset  # (S,) most source delay ahead of a known target
+    for two in (False, True):
+        rows = slots.exclusive == two
 
-    A delay is a variable or a known integer (a robot whose times a neighbourhood
-    search holds fixed, or the zero-delay slot E); between two known ones the slot
-    either always holds (dropped) or never (its literals may not all be true).
-    """
-    for target, lits, src, off in slots:
-        lhs, rhs = delay[target], delay[src]
-        if isinstance(lhs, int) and isinstance(rhs, int):
-            if lhs < rhs + off:
-                model.add_bool_or([lit.Not() for lit in lits])
-        elif not (isinstance(rhs, int) and rhs + off <= 0):  # else waits for nothing
-            model.add(lhs >= rhs + off).only_enforce_if(lits)
+        def enforce(mask: np.ndarray, two: bool = two) -> list[np.ndarray]:
+            return [direction[mask], exclusive[mask]] if two else [direction[mask]]
+
+        both = rows & (target_var >= 0) & (source_var >= 0)
+        add_linear(
+            model, [target_var[both], source_var[both]], [1, -1], slots.offset[both],
+            INT64_MAX, enforce(both),
+        )  # fmt: skip
+        late = rows & (target_var >= 0) & (source_var < 0) & (after > 0)
+        add_linear(model, [target_var[late]], [1], after[late], INT64_MAX, enforce(late))
+        early = rows & (target_var < 0) & (source_var >= 0)
+        add_linear(model, [source_var[early]], [1], INT64_MIN, before[early], enforce(early))
+    never = np.flatnonzero((target_var < 0) & (source_var < 0) & (target_known < after))
+    width = 1 + slots.exclusive[never]  # (N,) literals per clause
+    clause = np.stack([negated(direction[never]), negated(exclusive[never])], axis=1)
+    add_clauses(
+        model,
+        np.concatenate([[0], np.cumsum(width)]),
+        clause[np.arange(2) < width[:, None]],
+    )
 
 
 def _pin_delays(
     model: cp_model.CpModel,
     problem: Problem,
-    delay: list,
-    slots: list[tuple[int, list, int, int]],
+    delays: Delays,
+    slots: Slots,
+    literals: tuple[np.ndarray, np.ndarray],
     horizon: int,
 ) -> None:
-    """Make every delay equal its least value: max(0, previous event, active waits)."""
-    zero = delay[-1]
-    terms: list[list] = [[zero] for _ in range(problem.events.size)]
-    for e, nxt in enumerate(problem.event_next.tolist()):
-        if nxt >= 0:
-            terms[nxt].append(delay[e])
-    for k, (target, lits, src, off) in enumerate(slots):
-        wait = model.new_int_var(-horizon, horizon, f"wait_{k}")
-        model.add(wait == delay[src] + off).only_enforce_if(lits)
-        for lit in lits:  # inactive: the wait counts as zero (delays are never negative)
-            model.add(wait == 0).only_enforce_if(lit.Not())
-        terms[target].append(wait)
-    for e, parts in enumerate(terms):
-        model.add_max_equality(delay[e], parts)
+    """Make every delay (all variables but E's) equal its least value: max(0, previous
+    event, active waits)."""
+    direction, exclusive = slots.literals(*literals)  # (S,) each
+    wait = new_vars(model, slots.target.size, -horizon, horizon)  # (S,)
+    source_var = delays.var[slots.source]
+    value = delays.known[slots.source] + slots.offset  # (S,) where the source is known
+    for two in (False, True):
+        rows = slots.exclusive == two
+
+        def enforce(mask: np.ndarray, two: bool = two) -> list[np.ndarray]:
+            return [direction[mask], exclusive[mask]] if two else [direction[mask]]
+
+        var = rows & (source_var >= 0)
+        add_linear(
+            model, [wait[var], source_var[var]], [1, -1], slots.offset[var], slots.offset[var],
+            enforce(var),
+        )  # fmt: skip
+        known = rows & (source_var < 0)
+        add_linear(model, [wait[known]], [1], value[known], value[known], enforce(known))
+    # Inactive: the wait counts as zero (delays are never negative).
+    add_linear(model, [wait], [1], 0, 0, [negated(direction)])
+    add_linear(model, [wait[slots.exclusive]], [1], 0, 0, [negated(exclusive[slots.exclusive])])
+    n_events = problem.events.size
+    follows = np.flatnonzero(problem.event_next >= 0)  # (F,) events with a next one
+    start, terms = csr(
+        np.concatenate([problem.event_next[follows], slots.target]),
+        np.concatenate([delays.var[follows], wait]),
+        n_events,
+    )
+    add_max(model, delays.var[:n_events], start, terms)
 
 
 def _set_objective(
     model: cp_model.CpModel,
     problem: Problem,
     objective: Objective,
-    completion: list,
-    delay: list,
+    ti: np.ndarray,
+    delays: Delays,
     bound: int,
 ) -> None:
     """Minimize the integer-scaled objective (constant terms dropped where harmless)."""
     n = problem.n_robots
+    last_event = problem.tp_event[problem.last_tp]  # (R,)
+    var = delays.var[last_event]  # (R,) each robot's completion: ti + known, or + a variable
+    base = ti[problem.last_tp] + np.where(var < 0, delays.known[last_event], 0)
     if objective == "avg_completion":
-        model.minimize(sum(completion))
-    elif objective == "max_completion":
-        top = model.new_int_var(0, bound, "max_completion")
-        model.add_max_equality(top, completion)
-        model.minimize(top)
-    elif objective == "sync_completion":
-        # n^2 * sync = n * sum(c) + sum_i |n c_i - sum(c)|
-        total = sum(completion)
-        dev = [model.new_int_var(0, 2 * n * n * bound, f"dev_{i}") for i in range(n)]
-        for i in range(n):
-            model.add_abs_equality(dev[i], n * completion[i] - total)
-        model.minimize(n * total + sum(dev))
-    else:  # avg_delay: mean over robots of the mean delay over the robot's time points
-        model.minimize(sum(int(w) * delay[e] for e, w in enumerate(delay_weights(problem)) if w))
+        minimize(model, var[var >= 0], 1, int(base.sum()))
+    elif objective == "avg_delay":  # mean over robots of the mean delay over its time points
+        weights = delay_weights(problem)
+        used = (weights > 0) & (delays.var[:-1] >= 0)
+        minimize(model, delays.var[:-1][used], weights[used])
+    else:
+        completion = [
+            int(b) + (model.get_int_var_from_proto_index(v) if v >= 0 else 0)
+            for v, b in zip(var.tolist(), base.tolist(), strict=True)
+        ]  # (R,) expressions
+        if objective == "max_completion":
+            top = model.new_int_var(0, bound, "max_completion")
+            model.add_max_equality(top, completion)
+            model.minimize(top)
+        else:  # sync_completion: n^2 * sync = n * sum(c) + sum_i |n c_i - sum(c)|
+            total = sum(completion)
+            dev = [model.new_int_var(0, 2 * n * n * bound, f"dev_{i}") for i in range(n)]
+            for i in range(n):
+                model.add_abs_equality(dev[i], n * completion[i] - total)
+            model.minimize(n * total + sum(dev))
 
 
 def delay_weights(problem: Problem) -> np.ndarray:
@@ -404,10 +499,8 @@ def _read(
     solver: cp_model.CpSolver | cp_model.CpSolverSolutionCallback, em: ExactModel
 ) -> Assignments:
     """The assignment of the solver's current (or the callback's new) solution."""
-    return Assignments.single(
-        [solver.boolean_value(x) for x in em.a_first],
-        [solver.boolean_value(f) for f in em.following],
-    )
+    values = solution_of(solver)  # (X,)
+    return Assignments.single(values[em.a_first] > 0, values[em.following] > 0)
 
 
 def _result(solver: cp_model.CpSolver, em: ExactModel, status: int) -> ExactResult:
@@ -568,7 +661,7 @@ def exact(ctx: SolveContext) -> SolverOutput | None:
     policy says so; no answer (None: the dispatcher falls back to FCFS) when building the
     model alone is expected to outlast the limit, instead of overrunning it (a 1 s request
     on a 250-robot warehouse took 2.2 s, building for 2.1 s)."""
-    if build_seconds(ctx.problem, ctx.cliques) > ctx.time_limit_s:
+    if build_seconds(ctx.problem, ctx.cliques, ctx.objective) > ctx.time_limit_s:
         return None
     result = solve(
         ctx.problem,

@@ -58,13 +58,25 @@ from service.core.assignment import Assignments
 from service.core.csr import csr, gather
 from service.core.evaluate import Evaluation, Evaluator
 from service.core.orientation import _leads_to
+from service.solvers.cpsat_arrays import (
+    INT64_MAX,
+    INT64_MIN,
+    add_hints,
+    add_linear,
+    add_sums,
+    minimize,
+    new_vars,
+)
 from service.solvers.exact import (
     LINEARIZATION_LEVEL,
+    Delays,
     ExactModel,
-    add_hints,
+    add_conflict_order,
+    add_path_order,
     add_waits,
     delay_weights,
     integer_times,
+    literal_domains,
     search,
     time_slots,
 )
@@ -126,6 +138,7 @@ class _Fleet:
     grid: Evaluator  # least delays of the grid-rounded problem
     delay_weight: np.ndarray  # (E,) int weight of each event's delay in avg_delay
     binding: np.ndarray  # (Q,) bool cliques whose budget can bind
+    domains: tuple[np.ndarray, ...]  # (M,) each: literal_domains' a_lo, a_hi, f_lo, f_hi
 
     @classmethod
     def of(cls, ctx: SolveContext) -> _Fleet:
@@ -151,6 +164,7 @@ class _Fleet:
             grid,
             delay_weights(p),
             ctx.cliques.binding(),
+            literal_domains(p, ctx.cliques.forbidden()),
         )
 
     def conflicts_of(self, robots: np.ndarray) -> np.ndarray:
@@ -233,68 +247,49 @@ class _Neighbourhood:
     ) -> None:
         # Data.
         problem = ctx.problem
-        a_first, following, grid_delay = current.a_first, current.following, current.grid_delay
         self.conflicts = fleet.conflicts_of(robots)  # (K,) freed
-        model = cp_model.CpModel()
-        m = problem.n_conflicts
-
         events = fleet.events_of(robots)  # (N,) the picked robots' events, by robot
+        model = cp_model.CpModel()
+        k = self.conflicts.size
 
-        # Variables: the picked robots' delays, the freed conflicts' literals.
-        delay: list = grid_delay.tolist()  # held robots' delays stay integers
-        for e in events.tolist():
-            delay[e] = model.new_int_var(0, fleet.horizon, f"delay_{e}")
-        a_lit: list = [None] * m
-        f_lit: list = [None] * m
-        for c in self.conflicts.tolist():
-            a_lit[c] = model.new_bool_var(f"a_first_{c}")
-            f_lit[c] = model.new_bool_var(f"following_{c}")
+        # Variables: the freed conflicts' literals, the picked robots' delays.
+        a_lo, a_hi, f_lo, f_hi = (d[self.conflicts] for d in fleet.domains)
+        a_lit = np.full(problem.n_conflicts, -1, dtype=np.int64)  # (M,) -1: held
+        f_lit = a_lit.copy()
+        a_lit[self.conflicts] = new_vars(model, k, a_lo, a_hi)
+        f_lit[self.conflicts] = new_vars(model, k, f_lo, f_hi)
+        delay_var = np.full(current.grid_delay.size, -1, dtype=np.int64)  # (E+1,)
+        delay_var[events] = new_vars(model, events.size, 0, fleet.horizon)
+        delays = Delays(delay_var, current.grid_delay)  # held robots' delays stay known
         self.em = ExactModel(
             model,
-            [a_lit[c] for c in self.conflicts.tolist()],
-            [f_lit[c] for c in self.conflicts.tolist()],
+            a_lit[self.conflicts],
+            f_lit[self.conflicts],
             fleet.scale,
             LINEARIZATION_LEVEL[ctx.objective],
         )
         # Hint: the current answer (add_hint first: it clears earlier hints).
-        self.em.add_hint(Assignments.single(a_first[self.conflicts], following[self.conflicts]))
-        add_hints(model, [delay[e] for e in events.tolist()], grid_delay[events].tolist())
+        self.em.add_hint(
+            Assignments.single(current.a_first[self.conflicts], current.following[self.conflicts])
+        )
+        add_hints(model, delay_var[events], current.grid_delay[events])
 
         # Constraints.
-        self._fix(ctx, a_lit, f_lit)
         self._order(ctx, robots, a_lit, current)
         self._budgets(ctx, fleet, current, f_lit)
-        for e in events[~np.isin(events, fleet.event_start[robots])].tolist():
-            model.add(delay[e] >= delay[e - 1])  # along each robot's path
+        add_path_order(model, delay_var, events[~np.isin(events, fleet.event_start[robots])] - 1)
         live = self.conflicts[~problem.realized[self.conflicts]]
-        add_waits(model, time_slots(problem, fleet.ti, a_lit, f_lit, live), delay)
+        add_waits(model, time_slots(problem, fleet.ti, live), a_lit, f_lit, delays)
 
         # Objective: the picked robots' part (the held robots' is a constant).
         if ctx.objective == "avg_completion":
-            last = problem.tp_event[problem.last_tp[robots]]
-            model.minimize(cp_model.LinearExpr.sum([delay[e] for e in last.tolist()]))
+            last = delay_var[problem.tp_event[problem.last_tp[robots]]]  # (k,) -1: never waits
+            minimize(model, last[last >= 0], 1)
         else:  # avg_delay
-            weights = fleet.delay_weight[events]
-            model.minimize(
-                cp_model.LinearExpr.weighted_sum([delay[e] for e in events.tolist()], weights)
-            )
-
-    def _fix(self, ctx: SolveContext, a_lit: list, f_lit: list) -> None:
-        """Fixed directions and types, and no following type in a zero-budget clique."""
-        p, model = ctx.problem, self.em.model
-        conflicts = self.conflicts
-        forced = p.forced[conflicts]  # (K,) +1 a first, -1 b first, 0 free
-        for c, a_first in zip(
-            conflicts[forced != 0].tolist(), forced[forced != 0] > 0, strict=True
-        ):
-            model.add(a_lit[c] == int(a_first))
-        fixed = p.fixed_type[conflicts]  # (K,) 1 following, 0 exclusive, -1 free
-        fixed = np.where((fixed < 0) & ~ctx.orientation.may_follow[conflicts], 0, fixed)
-        for c, kind in zip(conflicts[fixed >= 0].tolist(), fixed[fixed >= 0].tolist(), strict=True):
-            model.add(f_lit[c] == kind)
+            minimize(model, delay_var[events], fleet.delay_weight[events])
 
     def _order(
-        self, ctx: SolveContext, robots: np.ndarray, a_lit: list, current: _Incumbent
+        self, ctx: SolveContext, robots: np.ndarray, a_lit: np.ndarray, current: _Incumbent
     ) -> None:
         """Acyclicity: node positions increasing along the picked robots' paths, along every
         freed conflict, and from each held node a freed conflict touches (a *boundary* node)
@@ -311,24 +306,22 @@ class _Neighbourhood:
             np.flatnonzero(boundary), boundary, picked_node, *graph.walk_args(current.a_first)
         )
         nodes = np.flatnonzero(boundary | picked_node)  # (N,)
-        order = np.argsort(np.argsort(current.rank[nodes]))  # (N,) hint: the current order
-        pos = {v: model.new_int_var(0, nodes.size - 1, f"pos_{v}") for v in nodes.tolist()}
-        add_hints(model, list(pos.values()), order.tolist())
-        for r in robots.tolist():
-            for v in range(p.robot_start[r] + 1, p.robot_start[r + 1]):
-                model.add(pos[v] >= pos[v - 1] + 1)
-        for u, v in zip(tails.tolist(), heads.tolist(), strict=True):
-            model.add(pos[v] >= pos[u] + 1)
-        for c in self.conflicts.tolist():
-            a, b = int(p.conf_a[c]), int(p.conf_b[c])
-            model.add(pos[b] >= pos[a] + 1).only_enforce_if(a_lit[c])
-            model.add(pos[a] >= pos[b] + 1).only_enforce_if(a_lit[c].Not())
+        pos = np.full(p.n_nodes, -1, dtype=np.int64)  # (V,) position variables, -1: none
+        pos[nodes] = new_vars(model, nodes.size, 0, nodes.size - 1)
+        add_hints(model, pos[nodes], np.argsort(np.argsort(current.rank[nodes])))  # current order
+        along = np.flatnonzero(picked_node[1:] & (p.node_robot[1:] == p.node_robot[:-1]))
+        add_linear(model, [pos[along + 1], pos[along]], [1, -1], 1, INT64_MAX)
+        add_linear(model, [pos[heads], pos[tails]], [1, -1], 1, INT64_MAX)
+        conf_a, conf_b = p.conf_a[self.conflicts], p.conf_b[self.conflicts]
+        add_conflict_order(model, pos[conf_a], pos[conf_b], a_lit[self.conflicts])
 
-    def _budgets(self, ctx: SolveContext, fleet: _Fleet, current: _Incumbent, f_lit: list) -> None:
+    def _budgets(
+        self, ctx: SolveContext, fleet: _Fleet, current: _Incumbent, f_lit: np.ndarray
+    ) -> None:
         """At most what its held conflicts leave of each binding clique's budget."""
         cliques, graph = ctx.cliques, ctx.orientation
         clique, conflict = gather(graph.cq_start, graph.cq_clique, self.conflicts)  # (N,) pairs
-        binding = fleet.binding[clique]  # others: forbidden (see _fix) or never binding
+        binding = fleet.binding[clique]  # others: forbidden (see literal_domains) or never binding
         order = np.argsort(clique[binding], kind="stable")
         clique, conflict = clique[binding][order], conflict[binding][order]
         touched, first = np.unique(clique, return_index=True)  # (T,)
@@ -336,8 +329,8 @@ class _Neighbourhood:
             return
         freed_following = np.add.reduceat(current.following[conflict].astype(np.int64), first)
         room = cliques.budget[touched] - (current.counts[touched] - freed_following)  # (T,)
-        for freed, left in zip(np.split(conflict, first[1:]), room.tolist(), strict=True):
-            self.em.model.add(cp_model.LinearExpr.sum([f_lit[c] for c in freed.tolist()]) <= left)
+        start = np.append(first, conflict.size)  # (T+1,)
+        add_sums(self.em.model, start, f_lit[conflict], INT64_MIN, room)
 
     def solve(
         self, current: _Incumbent, time_limit_s: float, seed: int

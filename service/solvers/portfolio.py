@@ -137,7 +137,9 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
     )
     lns_only = uses_lns and problem.n_conflicts >= ctx.lns_min_conflicts
     # The least time worth a CP-SAT stage (inf: none at this size).
-    exact_min_s = np.inf if too_large or lns_only else build_seconds(problem, ctx.cliques)
+    exact_min_s = (
+        np.inf if too_large or lns_only else build_seconds(problem, ctx.cliques, ctx.objective)
+    )
     exact_min_s *= EXACT_TIME_PER_BUILD
     if problem.n_conflicts > ctx.exact_max_conflicts:
         first = "tabu" if ctx.warm is not None else ctx.first_stage

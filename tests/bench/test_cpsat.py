@@ -32,8 +32,8 @@ def test_the_cutoff_is_the_incumbents_cost_exactly() -> None:
     assert cost <= bound + 1e-9
     # Tight, not below: the incumbent itself stays feasible.
     values = [*incumbent.a_first[0].tolist(), *incumbent.following[0].tolist()]
-    for lit, val in zip([*em.a_first, *em.following], values, strict=True):
-        em.model.add(lit == int(val))
+    for lit, val in zip([*em.a_first.tolist(), *em.following.tolist()], values, strict=True):
+        em.model.add(em.model.get_bool_var_from_proto_index(lit) == int(val))
     pinned = search(em, 5.0)
     assert pinned is not None and pinned.optimal
     assert np.array_equal(pinned.assignment.a_first, incumbent.a_first)

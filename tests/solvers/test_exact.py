@@ -143,11 +143,13 @@ def test_exact_declines_when_building_alone_would_overrun() -> None:
     the time, the same problem is solved."""
     problem = problem_from_request(ScheduleRequest.model_validate(stitched_problem(1, 250, 4.0)))
     ctx = SolveContext(problem, "avg_completion", 0.05)
-    assert build_seconds(problem, ctx.cliques) > 0.05
+    assert build_seconds(problem, ctx.cliques, ctx.objective) > 0.05
     start = time.perf_counter()
     assert exact(ctx) is None
     assert time.perf_counter() - start < 0.05
-    roomy = SolveContext(problem, "avg_completion", 10 * build_seconds(problem, ctx.cliques))
+    roomy = SolveContext(
+        problem, "avg_completion", 10 * build_seconds(problem, ctx.cliques, ctx.objective)
+    )
     roomy.__dict__["cliques"] = ctx.cliques
     out = exact(roomy)
     assert out is not None
