@@ -113,6 +113,29 @@ def test_every_sub_problem_answer_is_valid_and_no_worse(
     assert costs[0] <= costs[1] + grid
 
 
+@settings(max_examples=30, deadline=None, derandomize=True)
+@given(
+    family=st.sampled_from(["tiny", "small", "stitched", "conformance"]),
+    seed=st.integers(0, 10_000),
+    robots=st.integers(3, 30),
+)
+def test_every_waiting_robot_has_a_binding_wait_with_a_robot_it_meets(
+    family: str, seed: int, robots: int
+) -> None:
+    """The waits a neighbourhood prefers to free together: a robot delayed anywhere on its
+    path waits for at least one other robot by a wait that sets its delay, and binding
+    waits pair only robots that share a conflict."""
+    ctx = _context(_request(family, seed, robots), "avg_completion")
+    fleet = lns._Fleet.of(ctx)
+    current = lns._Incumbent.start(ctx, fleet, plain_start(ctx))
+    waits = current.waits.toarray() > 0  # (R, R)
+    assert not (waits & ~(fleet.shared.toarray() > 0)).any()
+    delayed = np.zeros(ctx.problem.n_robots, dtype=bool)  # (R,) any event's delay positive
+    events = np.flatnonzero(current.grid_delay[:-1] > 0)
+    delayed[np.searchsorted(fleet.event_start, events, side="right") - 1] = True
+    assert np.array_equal(delayed & waits.any(axis=1), delayed)
+
+
 @pytest.mark.parametrize("objective", lns.LNS_OBJECTIVES)
 @pytest.mark.parametrize("seed", range(12))
 def test_freeing_every_robot_reaches_the_brute_force_optimum(
