@@ -166,8 +166,7 @@ class _Fleet:
         event_start = np.searchsorted(event_robot, np.arange(n_robots + 1))
         grid = Evaluator(replace(p, tp_time=ti / scale))
         slots = time_slots(p, ti, np.flatnonzero(~p.realized))
-        event_robot = np.append(event_robot, -1)  # (E+1,) the zero slot E: no robot
-        waiter = event_robot[slots.target]
+        waiter = event_robot[slots.target]  # (S,) targets are events (pair entries)
         return cls(
             conf_robots,
             robot_conflicts,
