@@ -168,14 +168,14 @@ class Delays:
     neighbourhood search holds, and the zero-delay slot E). Shapes (E+1,)."""
 
     var: np.ndarray  # int64 proto index, -1 where the delay is known
-    known: np.ndarray  # int64 the delay where var is -1 (else the hint)
+    known: np.ndarray  # int64 the delay where var is -1 (elsewhere unread)
 
 
 # The least search time CP-SAT gets when building its model used up the time limit.
 MIN_SEARCH_S = 0.001
 # Building the model, measured (session 20, constraints written from arrays, see
 # cpsat_arrays; 3 builds each, the slowest kept): 29-74 us per conflict for the objectives
-# bounded from below, 84-174 us for sync_completion (pinned delays) on generated worlds of
+# monotone in the delays, 84-174 us for sync_completion (pinned delays) on generated worlds of
 # 515-21,835 conflicts (before: 70-113 us and 158-240 us); plus its density constraints:
 # 0.25-0.57 s for 16,384-46,656 binding cliques holding 327,680-708,588 conflicts (complete
 # multipartite graphs, measured before), ~8 us per clique and ~0.5 us per conflict in it.
