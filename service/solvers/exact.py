@@ -332,6 +332,21 @@ class Slots:
         lits = a_first[self.conflict]
         return np.where(self.a_first, lits, negated(lits)), negated(following[self.conflict])
 
+    def enforcing(
+        self, a_first: np.ndarray, following: np.ndarray
+    ) -> list[tuple[np.ndarray, list[np.ndarray]]]:
+        """The rows in two groups by what enforces them: (rows (S,) bool, literal columns
+        (S,) each), the direction literal alone, then with the exclusive-type literal."""
+        direction, exclusive = self.literals(a_first, following)
+        return [(~self.exclusive, [direction]), (self.exclusive, [direction, exclusive])]
+
+    def active(self, a_first: np.ndarray, following: np.ndarray) -> np.ndarray:
+        """(S,) bool: the rows whose literals hold in an assignment (``a_first``,
+        ``following`` (M,) bool)."""
+        return (self.a_first == a_first[self.conflict]) & ~(
+            self.exclusive & following[self.conflict]
+        )
+
 
 def time_slots(problem: Problem, ti: np.ndarray, conflicts: np.ndarray) -> Slots:
     """The time constraints of ``conflicts`` (K,) (never realized ones: they only relate
@@ -365,26 +380,25 @@ def add_waits(
     bound on the other (dropped where it waits for nothing: delays are never negative);
     between two known delays nothing where it holds, else a clause forbidding its
     literals."""
-    direction, exclusive = slots.literals(a_first, following)  # (S,) each
     target_var, source_var = delays.var[slots.target], delays.var[slots.source]
     target_known, source_known = delays.known[slots.target], delays.known[slots.source]
     after = source_known + slots.offset  # (S,) least target delay behind a known source
     before = target_known - slots.offset  # (S,) most source delay ahead of a known target
-    for two in (False, True):
-        rows = slots.exclusive == two
-
-        def enforce(mask: np.ndarray, two: bool = two) -> list[np.ndarray]:
-            return [direction[mask], exclusive[mask]] if two else [direction[mask]]
-
+    for rows, lits in slots.enforcing(a_first, following):
         both = rows & (target_var >= 0) & (source_var >= 0)
         add_linear(
             model, [target_var[both], source_var[both]], [1, -1], slots.offset[both],
-            INT64_MAX, enforce(both),
+            INT64_MAX, [lit[both] for lit in lits],
         )  # fmt: skip
         late = rows & (target_var >= 0) & (source_var < 0) & (after > 0)
-        add_linear(model, [target_var[late]], [1], after[late], INT64_MAX, enforce(late))
+        add_linear(
+            model, [target_var[late]], [1], after[late], INT64_MAX, [lit[late] for lit in lits]
+        )
         early = rows & (target_var < 0) & (source_var >= 0)
-        add_linear(model, [source_var[early]], [1], INT64_MIN, before[early], enforce(early))
+        add_linear(
+            model, [source_var[early]], [1], INT64_MIN, before[early], [lit[early] for lit in lits]
+        )
+    direction, exclusive = slots.literals(a_first, following)  # (S,) each
     never = np.flatnonzero((target_var < 0) & (source_var < 0) & (target_known < after))
     width = 1 + slots.exclusive[never]  # (N,) literals per clause
     clause = np.stack([negated(direction[never]), negated(exclusive[never])], axis=1)
@@ -405,24 +419,21 @@ def _pin_delays(
 ) -> None:
     """Make every delay (all variables but E's) equal its least value: max(0, previous
     event, active waits)."""
-    direction, exclusive = slots.literals(*literals)  # (S,) each
     wait = new_vars(model, slots.target.size, -horizon, horizon)  # (S,)
     source_var = delays.var[slots.source]
     value = delays.known[slots.source] + slots.offset  # (S,) where the source is known
-    for two in (False, True):
-        rows = slots.exclusive == two
-
-        def enforce(mask: np.ndarray, two: bool = two) -> list[np.ndarray]:
-            return [direction[mask], exclusive[mask]] if two else [direction[mask]]
-
+    for rows, lits in slots.enforcing(*literals):
         var = rows & (source_var >= 0)
         add_linear(
             model, [wait[var], source_var[var]], [1, -1], slots.offset[var], slots.offset[var],
-            enforce(var),
+            [lit[var] for lit in lits],
         )  # fmt: skip
         known = rows & (source_var < 0)
-        add_linear(model, [wait[known]], [1], value[known], value[known], enforce(known))
+        add_linear(
+            model, [wait[known]], [1], value[known], value[known], [lit[known] for lit in lits]
+        )
     # Inactive: the wait counts as zero (delays are never negative).
+    direction, exclusive = slots.literals(*literals)  # (S,) each
     add_linear(model, [wait], [1], 0, 0, [negated(direction)])
     add_linear(model, [wait[slots.exclusive]], [1], 0, 0, [negated(exclusive[slots.exclusive])])
     n_events = problem.events.size

@@ -266,9 +266,9 @@ def _binding_waits(
     ``following`` (M,)) whose wait sets their robot's delay (``grid_delay`` (E+1,)): the
     robots that hold each other up now, whom a neighbourhood should free together."""
     s = fleet.slots
-    active = (s.a_first == a_first[s.conflict]) & ~(s.exclusive & following[s.conflict])
     waited = grid_delay[s.target]
-    binding = active & (waited > 0) & (waited == grid_delay[s.source] + s.offset)  # (S,)
+    binding = s.active(a_first, following) & (waited > 0)
+    binding &= waited == grid_delay[s.source] + s.offset  # (S,)
     waiter, blocker = fleet.slot_robots[binding].T
     n = fleet.event_start.size - 1
     pairs = coo_array((np.ones(waiter.size), (waiter, blocker)), shape=(n, n))
