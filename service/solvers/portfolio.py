@@ -3,8 +3,9 @@
 It returns when optimality is proven or when the budget is spent, whichever
 comes first, improving in stages:
 
-1. **instant**: the cheapest of FCFS, its blends toward robot priorities and the
-   previous answer of a re-schedule (:func:`~service.solvers.tabu.plain_start`;
+1. **instant**: the cheapest of FCFS, its blends toward robot priorities (each with
+   FCFS's types or the types its directions gain most from) and the previous answer of
+   a re-schedule (:func:`~service.solvers.tabu.plain_start`;
    valid by construction, milliseconds);
 2. **first stage** (problems above ``exact_max_conflicts``): the policy's large
    solver (default ``priority_tabu``: robot-priority search from that start until it

@@ -129,8 +129,9 @@ def tabu_search(
 
 def plain_start(ctx: SolveContext) -> Assignments:
     """Where a search starts without a model: the cheapest of FCFS, its blends toward
-    robot priorities (:func:`~service.solvers.fcfs.blended_priorities`) and the warm
-    start (the previous answer of a re-schedule). On congested warehouses a blend costs
+    robot priorities (:func:`~service.solvers.fcfs.blended_priorities`), each with
+    FCFS's types or with those its directions gain most from, and the warm start (the
+    previous answer of a re-schedule). On congested warehouses a blend costs
     0.55-0.9 of FCFS, and searches starting there end lower within the same time.
 
     Kept in ``ctx`` once found: the portfolio's start and its first stage both ask."""
