@@ -24,7 +24,6 @@ __all__ = [
     "cheapest_blend",
     "fcfs",
     "fcfs_priorities",
-    "following_gain",
 ]
 
 # The starts of :func:`blended_priorities`: node ranks moved from the node's enter time
@@ -74,30 +73,11 @@ def blended_priorities(problem: Problem) -> tuple[np.ndarray, np.ndarray]:
     return ranks, np.repeat(scores[None], mu.size, axis=0)
 
 
-def following_gain(problem: Problem, a_first: np.ndarray) -> np.ndarray:
-    """Type scores (S, M) from directions (S, M): the wait, at planned times, that
-    following-type spares the side passing second against exclusive (it may enter once
-    the first side has entered, not only once it has left).
-
-    Where a clique's budget admits only some following-type conflicts, FCFS's scores
-    give it to the earliest ones; on congested warehouses of 100 robots the budget
-    spent where it spares the most lowered the cheapest blend by 5-10 % and robot-priority
-    search (which keeps the start's types) from there by 4-8 % (docs/benchmarks.md,
-    "Anytime auto", session 21).
-    """
-    first = np.where(a_first, 0, 1)  # (S, M) side passing first
-    rows = np.arange(problem.n_conflicts)  # (M,)
-    first_enter = problem.pair_enter[rows, first]  # (S, M)
-    first_exit = problem.pair_exit[rows, first]
-    second_enter = problem.pair_enter[rows, 1 - first]
-    return np.maximum(first_exit - second_enter, 0.0) - np.maximum(first_enter - second_enter, 0.0)
-
-
 def cheapest_blend(ctx: SolveContext) -> tuple[np.ndarray, Assignments, float]:
     """The cheapest start of :func:`blended_priorities` under ``ctx``'s objective, each
     row's directions with FCFS's types or with the types its directions gain most from
-    (:func:`following_gain`): its node ranks (V,), its assignment (a batch of one) and
-    its cost.
+    (:meth:`~service.core.decode.Decoder.gain_types`): its node ranks (V,), its
+    assignment (a batch of one) and its cost.
 
     Kept in ``ctx`` once found (~50 ms at 22,000 conflicts): the portfolio's start and
     the searches that start there (tabu, priority search) all ask, and contexts copied
@@ -108,7 +88,7 @@ def cheapest_blend(ctx: SolveContext) -> tuple[np.ndarray, Assignments, float]:
         a_first = ctx.decoder.directions(ranks)  # (K, M)
         # Every row has FCFS's scores, and types depend on scores alone: decoded once.
         fcfs_types = np.repeat(ctx.decoder.types(scores[:1]), len(ranks), axis=0)  # (K, M)
-        gain_types = ctx.decoder.types(following_gain(ctx.problem, a_first))  # (K, M)
+        gain_types = ctx.decoder.gain_types(a_first)  # (K, M)
         found = Assignments(
             np.concatenate([a_first, a_first]), np.concatenate([fcfs_types, gain_types])
         )  # 2K rows

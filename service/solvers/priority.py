@@ -12,7 +12,7 @@ evaluates ``candidates`` of them that reorder something (a third of the shifts c
 other robot's rank where they meet, and are skipped) in one batched call and keeps the
 cheapest if it beats the current (a (1 + lambda) strategy). Types stay the start's
 (FCFS's greedy fill, or the one by the wait each following-type conflict spares under
-the start's directions, :func:`~service.solvers.fcfs.following_gain`): with the latter,
+the start's directions, :func:`~service.core.decode.following_gain`): with the latter,
 the same search ended 4-8 % lower on 100-robot warehouses.
 
 Measured (docs/benchmarks.md, "Anytime auto"): as ``auto``'s first stage it beat tabu

@@ -15,7 +15,8 @@ from hypothesis import strategies as st
 from service.core.assignment import Assignments
 from service.core.check import check
 from service.core.cliques import Cliques, find_cliques
-from service.core.decode import Decoder, bids_from_ranks
+from service.core.decode import Decoder, bids_from_ranks, following_gain
+from service.core.evaluate import Evaluator
 from service.core.problem import Problem, problem_from_request
 from service.core.schemas import ScheduleRequest
 from service.learning.generate import small_problem, stitched_problem
@@ -290,3 +291,35 @@ def test_types_fill_budgets_greedily_by_score(seed: int, density: float) -> None
     got = Decoder(problem, cliques).types(scores)
     for s in range(3):
         assert got[s].tolist() == _greedy_types(problem, cliques, scores[s]).tolist(), s
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    times=st.lists(st.floats(0.0, 50.0), min_size=4, max_size=4),
+    a_first=st.booleans(),
+)
+def test_following_gain_is_the_wait_following_spares(times: list[float], a_first: bool) -> None:
+    """Two robots sharing one node (density 2): the evaluator's average completion with
+    the conflict exclusive minus with it following, times two robots, is the gain."""
+    (ea, xa), (eb, xb) = sorted(times[:2]), sorted(times[2:])
+    req = {
+        "robots": [
+            {
+                "id": r,
+                "nodes": [{"id": f"{r}/0", "enter": e, "exit": x + 1.0, "density": 2}],
+                "goal_time": 60.0,
+            }
+            for r, e, x in (("a", ea, xa), ("b", eb, xb))
+        ],
+        "conflicts": [{"a": "a/0", "b": "b/0"}],
+    }
+    problem = problem_from_request(ScheduleRequest.model_validate(req))
+    evaluator = Evaluator(problem)
+    first = np.array([[a_first]])  # (1, 1)
+    exclusive, following = (
+        evaluator.evaluate(Assignments(first, np.array([[kind]]))).costs["avg_completion"][0]
+        for kind in (False, True)
+    )
+    gain = following_gain(problem, first)
+    assert gain.shape == (1, 1) and gain[0, 0] >= 0.0
+    assert 2.0 * (exclusive - following) == pytest.approx(gain[0, 0], abs=1e-9)

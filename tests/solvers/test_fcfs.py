@@ -7,8 +7,6 @@ from typing import Any
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
 
 from service.core.assignment import Assignments
 from service.core.check import check
@@ -21,7 +19,6 @@ from service.solvers.fcfs import (
     blended_priorities,
     fcfs,
     fcfs_priorities,
-    following_gain,
 )
 from service.solvers.registry import SolveContext, SolverOutput, get_solver
 from service.solvers.tabu import plain_start
@@ -162,34 +159,6 @@ def test_the_plain_start_is_found_once_per_context_and_warm_start() -> None:
 def _corridor_robot(rid: str, enter: float, exit_: float, goal: float, density: int) -> dict:
     node = {"id": f"{rid}/0", "enter": enter, "exit": exit_, "density": density}
     return {"id": rid, "nodes": [node], "goal_time": goal}
-
-
-@settings(max_examples=60, deadline=None)
-@given(
-    times=st.lists(st.floats(0.0, 50.0), min_size=4, max_size=4),
-    a_first=st.booleans(),
-)
-def test_following_gain_is_the_wait_following_spares(times: list[float], a_first: bool) -> None:
-    """Two robots sharing one node: the evaluator's average completion with the conflict
-    exclusive minus with it following, times two robots, is the gain."""
-    (ea, xa), (eb, xb) = sorted(times[:2]), sorted(times[2:])
-    req = {
-        "robots": [
-            _corridor_robot("a", ea, xa + 1.0, 60.0, 2),
-            _corridor_robot("b", eb, xb + 1.0, 60.0, 2),
-        ],
-        "conflicts": [{"a": "a/0", "b": "b/0"}],
-    }
-    ctx = context(req, "avg_completion")
-    first = np.array([[a_first]])  # (1, 1)
-    exclusive, following = (
-        ctx.evaluator.evaluate(Assignments(first, np.array([[kind]]))).costs["avg_completion"][0]
-        for kind in (False, True)
-    )
-    gain = following_gain(ctx.problem, first)
-    assert gain.shape == (1, 1)
-    assert gain[0, 0] >= 0.0
-    assert 2.0 * (exclusive - following) == pytest.approx(gain[0, 0], abs=1e-9)
 
 
 def test_the_start_spends_a_following_budget_where_it_spares_most() -> None:
