@@ -163,10 +163,16 @@ def _directions(ranks: np.ndarray, conf_a: np.ndarray, conf_b: np.ndarray) -> np
     return out
 
 
-def following_gain(problem: Problem, a_first: np.ndarray) -> np.ndarray:
-    """Type scores (S, M) from directions (S, M): the wait, at planned times, that
-    following-type spares the side passing second against exclusive (it may enter once
-    the first side has entered, not only once it has left).
+def following_gain(
+    problem: Problem,
+    a_first: np.ndarray,
+    enter: np.ndarray | None = None,
+    exit_: np.ndarray | None = None,
+) -> np.ndarray:
+    """Type scores (S, M) from directions (S, M): the wait that following-type spares the
+    side passing second against exclusive (it may enter once the first side has entered,
+    not only once it has left), at pair enter and exit times ``enter`` and ``exit_``
+    ((M, 2), column 0 side a; default: the planned ones).
 
     Where a clique's budget admits only some following-type conflicts, FCFS's scores
     give it to the earliest ones; on congested warehouses of 100 robots the budget
@@ -174,11 +180,12 @@ def following_gain(problem: Problem, a_first: np.ndarray) -> np.ndarray:
     search (which keeps the start's types) from there by 4-8 % (docs/benchmarks.md,
     "Following-type where it spares most").
     """
+    enter = problem.pair_enter if enter is None else enter
+    exit_ = problem.pair_exit if exit_ is None else exit_
     first = np.where(a_first, 0, 1)  # (S, M) side passing first
     rows = np.arange(problem.n_conflicts)  # (M,)
-    first_enter = problem.pair_enter[rows, first]  # (S, M)
-    first_exit = problem.pair_exit[rows, first]
-    second_enter = problem.pair_enter[rows, 1 - first]
+    first_enter, first_exit = enter[rows, first], exit_[rows, first]  # (S, M) each
+    second_enter = enter[rows, 1 - first]
     return np.maximum(first_exit - second_enter, 0.0) - np.maximum(first_enter - second_enter, 0.0)
 
 
@@ -317,10 +324,13 @@ class Decoder:
             order, cand, self._bound_start, self._bound_cliques, self.cliques.budget
         )
 
-    def gain_types(self, a_first: np.ndarray) -> np.ndarray:
+    def gain_types(
+        self, a_first: np.ndarray, enter: np.ndarray | None = None, exit_: np.ndarray | None = None
+    ) -> np.ndarray:
         """following (S, M) bool for directions (S, M): every clique budget filled greedily
-        by the wait following-type spares (:func:`following_gain`), planned times."""
-        return self.types(following_gain(self.problem, a_first))
+        by the wait following-type spares (:func:`following_gain`) at pair times ``enter``
+        and ``exit_`` ((M, 2); default: planned)."""
+        return self.types(following_gain(self.problem, a_first, enter, exit_))
 
     def decode(
         self, bids: np.ndarray, scores: np.ndarray, threshold: float | None = None
