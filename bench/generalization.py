@@ -40,6 +40,7 @@ time. Under ``--out`` it writes:
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import time
 from collections.abc import Sequence
@@ -66,6 +67,7 @@ from bench.cases import (
 from bench.report import (
     MODEL_STORE,
     PERCENTILES,
+    JsonCache,
     add_run_args,
     fmt,
     jsonable,
@@ -114,6 +116,10 @@ class Config:
     candidate: Path | None = None  # a store (its default model) or one model's folder
     out: Path = Path("docs/results/generalization")
     cache: Path = Path("bench/cache")
+    # A committed run's results.json whose references (same worlds, objective and budget)
+    # seed the cache: a fresh machine measures against the yardstick of that run instead of
+    # spending 20 s per problem making its own.
+    references: Path | None = None
 
 
 QUICK = Config(
@@ -279,6 +285,32 @@ def model_info(policy: DispatchPolicy, cfg: Config) -> dict[str, Any]:
     return {"name": stored.name, "trained_kinds": sorted(kinds)}
 
 
+def seed_references(cache: JsonCache, worlds: Sequence[World], cfg: Config) -> None:
+    """Store in ``cache`` the references that ``cfg.references`` (a results.json of this
+    bench) holds for ``worlds`` by name, where the cache has none and that run's objective
+    and reference budget are ``cfg``'s.
+
+    Raises:
+        SystemExit: the file is not such a run, or is for another objective or budget.
+    """
+    try:
+        earlier = json.loads(cfg.references.read_text())
+        config, problems = earlier["config"], earlier["problems"]
+        same = (config["objective"], config["ref_budget_s"]) == (cfg.objective, cfg.ref_budget_s)
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise SystemExit(f"--references {cfg.references}: not a results.json ({exc})") from exc
+    if not same:
+        raise SystemExit(
+            f"--references {cfg.references}: {config['objective']} at {config['ref_budget_s']:g} s,"
+            f" not {cfg.objective} at {cfg.ref_budget_s:g} s"
+        )
+    by_name = {p["name"]: p["references"] for p in problems}
+    for world in worlds:
+        if world.case.name in by_name:
+            key = request_key(world.case, cfg.objective, cfg.ref_budget_s)
+            cache.get(key, lambda name=world.case.name: by_name[name])
+
+
 def run(cfg: Config, progress: bool = True) -> dict[str, Any]:
     """Derive the worlds, solve the references (cached) and every method; return everything
     that gets written."""
@@ -289,6 +321,8 @@ def run(cfg: Config, progress: bool = True) -> dict[str, Any]:
     by_model = policies(cfg)
     methods = methods_of(list(by_model))
     cache = reference_cache(cfg.cache, "generalization-ref")
+    if cfg.references is not None:
+        seed_references(cache, worlds, cfg)
     refs = [
         cache.get(
             request_key(w.case, cfg.objective, cfg.ref_budget_s),
@@ -559,6 +593,7 @@ def _parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     p.add_argument("--ref-budget", type=float, dest="ref_budget_s", help="reference seconds")
     p.add_argument("--objective", choices=OBJECTIVES)
     p.add_argument("--candidate", type=Path, help="a model store or one model's folder")
+    p.add_argument("--references", type=Path, help="a results.json whose references seed the cache")
     add_run_args(p)
     return p.parse_args(argv)
 

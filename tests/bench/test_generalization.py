@@ -81,6 +81,17 @@ def test_run_writes_everything_against_the_reference_and_reuses_it(
         assert by[(name, "gnn_vae [candidate]")] == by[(name, "gnn_vae")]
     assert "`gnn_vae [candidate]`" in (again / "tables.md").read_text()
 
+    # A fresh cache seeded from the first run's results.json: its yardstick, nothing solved.
+    seeded = tmp_path / "seeded"
+    flags = ["--references", str(out / "results.json"), "--cache", str(tmp_path / "fresh")]
+    assert main([*TINY, *flags, "--out", str(seeded)]) == 0
+    third = json.loads((seeded / "results.json").read_text())
+    assert [p["references"] for p in third["problems"]] == [
+        p["references"] for p in first["problems"]
+    ]
+    with pytest.raises(SystemExit, match="at 0.2 s, not avg_completion at 0.3 s"):
+        main([*TINY, *flags, "--ref-budget", "0.3", "--out", str(seeded)])
+
 
 def test_targets_need_every_figure_and_never_worse_than_fcfs() -> None:
     rows = [_row("fcfs", "a", 10.0), _row("gnn_vae", "a", 9.0),
