@@ -14,15 +14,12 @@ from service.core.check import check
 from service.core.cliques import Cliques, find_cliques
 from service.core.decode import Decoder
 from service.core.evaluate import Evaluator
-from service.core.path_schemas import PathsRequest
 from service.core.problem import Problem, problem_from_request
 from service.core.retype import refit_types, updated_pair_times
 from service.core.schemas import OBJECTIVES, ScheduleRequest
-from service.geometry.graph import GeometrySettings
 from service.learning.generate import stitched_problem
-from service.motion.plan import derive
-from service.scenarios import generate
 from service.solvers.fcfs import fcfs_priorities
+from tests.worlds import world_request
 
 
 @cache
@@ -65,10 +62,9 @@ def test_refitted_types_keep_the_directions_and_never_cost_more(
 
 @cache
 def _warehouse() -> tuple[Problem, Decoder, Evaluator]:
-    """A congested two-way warehouse of 25 robots (a benchmark world): waits there move
-    the pair times far from the planned ones."""
-    paths = PathsRequest.model_validate(generate("wh_two_way", 25, 60).to_request("avg_completion"))
-    request = derive(paths, GeometrySettings()).to_request(paths)
+    """A congested two-way warehouse of 25 robots: waits there move the pair times far
+    from the planned ones."""
+    request = ScheduleRequest.model_validate(world_request("wh_two_way", 25, 60))
     problem = problem_from_request(request)
     return problem, Decoder(problem, find_cliques(problem)), Evaluator(problem)
 
