@@ -10,10 +10,16 @@ N(0, (``step`` x time span)^2) to one random robot's offset, which reverses ever
 whose order against that robot the shift crosses, at once. Each round decodes and
 evaluates ``candidates`` of them that reorder something (a third of the shifts cross no
 other robot's rank where they meet, and are skipped) in one batched call and keeps the
-cheapest if it beats the current (a (1 + lambda) strategy). Types stay the start's
+cheapest if it beats the current (a (1 + lambda) strategy). Types start as the start's
 (FCFS's greedy fill, or the one by the wait each following-type conflict spares under
-the start's directions, :func:`~service.core.decode.following_gain`): with the latter,
-the same search ended 4-8 % lower on 100-robot warehouses.
+the start's directions, :func:`~service.core.decode.following_gain`: with the latter,
+the same search ended 4-8 % lower on 100-robot warehouses), and every
+``refit_every`` rounds the best's types are refitted to its directions at the waits
+its schedule has (:func:`~service.core.retype.refit_types`, kept only when cheaper):
+types chosen for the start's directions spend the density budgets where the moved
+robots no longer wait. That lifted ``auto`` at 5 s on generated warehouses of 25-250
+robots from 0.950-0.953 to 0.972-0.977 of the best known (docs/benchmarks.md,
+"Types refitted during priority search").
 
 Measured (docs/benchmarks.md, "Anytime auto"): as ``auto``'s first stage it beat tabu
 search alone on every generated warehouse and floor at 0.3-3 s (``wh_two_lane`` of 100
@@ -41,6 +47,7 @@ import numpy as np
 
 from service.core.assignment import Assignments
 from service.core.problem import Problem
+from service.core.retype import refit_types
 from service.solvers.fcfs import cheapest_blend
 from service.solvers.registry import SolveContext, SolverOutput, register
 from service.solvers.tabu import tabu_search
@@ -63,6 +70,15 @@ class PriorityConfig:
     step: float = 0.1  # offset standard deviation, as a share of the problem's time span
     patience: int = 30  # rounds without a cheaper candidate before stopping
     max_rounds: int = 100_000
+    # Rounds between refits of the best's types to its directions (0: never), in searches
+    # given at least refit_min_s seconds. Measured (docs/benchmarks.md, "Types refitted
+    # during priority search"; ``auto`` on generated warehouses, mean cost ratio): with
+    # 1-5 s of search, 250 robots +0.02-0.05, 100 robots +0.01-0.03; with 0.3 s (100
+    # robots at a 1-s budget, LNS after it) -0.01 to -0.03: early on the directions move
+    # fast and types fitted to them go stale. Every 100 rounds: as good at 250 robots,
+    # no gain at 100. (At a 1-s budget, 250 robots' search gets ~0.9 s: above 0.5.)
+    refit_every: int = 50
+    refit_min_s: float = 0.5
 
 
 class RankFlips:
@@ -141,7 +157,8 @@ def priority_search(
 
     Stops after ``cfg.patience`` rounds without improvement, after ``cfg.max_rounds`` or
     after ``budget_s`` seconds; deterministic for a seed when it stops on one of the first
-    two.
+    two. Given at least ``cfg.refit_min_s``, it refits the best's types every
+    ``cfg.refit_every`` rounds and once at the end.
     """
     deadline = time.perf_counter() + budget_s
     p, decoder, evaluator = ctx.problem, ctx.decoder, ctx.evaluator
@@ -152,10 +169,13 @@ def priority_search(
     ranks = decoder.repair(base[None])[0]  # (V,) the current best's repaired ranks
     sigma = cfg.step * float(p.node_exit.max() - p.node_enter.min())
     draws = 2 * cfg.candidates  # a third of single-robot shifts reorder nothing: drawn over
+    refit_every = cfg.refit_every if budget_s >= cfg.refit_min_s else 0
     stale = rounds = 0
     while stale < cfg.patience and rounds < cfg.max_rounds and time.perf_counter() < deadline:
         rounds += 1
         stale += 1
+        if refit_every and rounds % refit_every == 0:
+            best, best_cost = refit_types(decoder, evaluator, ctx.objective, best)
         robot = rng.integers(p.n_robots, size=draws)  # (D,)
         shifted = offsets[robot] + rng.normal(0.0, sigma, draws)  # (D,)
         moved, start, flipped, moved_ranks = shifted_flips(
@@ -170,6 +190,8 @@ def priority_search(
             offsets[robot[moved[k]]] = shifted[moved[k]]
             ranks = moved_ranks[k]
             stale = 0
+    if refit_every:
+        best, best_cost = refit_types(decoder, evaluator, ctx.objective, best)
     return best, best_cost, rounds
 
 

@@ -16,6 +16,7 @@ from hypothesis import strategies as st
 
 from service.core import evaluate
 from service.core.check import check
+from service.core.retype import refit_types
 from service.core.schemas import OBJECTIVES
 from service.learning.generate import stitched_problem
 from service.solvers.bbts import LEAVES, bbts
@@ -31,6 +32,7 @@ from service.solvers.priority import (
 from service.solvers.tabu import TabuConfig, tabu, tabu_search
 from tests.reference import feasible_assignments, fix_directions, reference_problem, tiny_request
 from tests.solvers.common import context, cost
+from tests.worlds import world_request
 
 SOLVERS = {"tabu": tabu, "priority_tabu": priority_tabu, "bbts": bbts}
 
@@ -104,6 +106,24 @@ def test_two_cores_change_no_step_of_the_search(name: str, monkeypatch: pytest.M
     assert two.detail == one.detail  # rounds and iterations
     assert np.array_equal(two.assignment.a_first, one.assignment.a_first)
     assert np.array_equal(two.assignment.following, one.assignment.following)
+
+
+def test_priority_search_refits_its_types_every_refit_every_rounds() -> None:
+    """On a congested warehouse, the round that refits comes out no dearer than the
+    refit of the rounds before it, which is cheaper than they were: the refit runs, and
+    only ever lowers the cost."""
+    ctx = context(world_request("wh_two_way", 25, 60), "avg_completion", seed=0)
+    rounds = 20
+    before, before_cost, _ = priority_search(
+        ctx, 30.0, seed=0, cfg=PriorityConfig(patience=10**6, max_rounds=rounds - 1, refit_every=0)
+    )
+    refit_cost = refit_types(ctx.decoder, ctx.evaluator, ctx.objective, before)[1]
+    assert refit_cost < before_cost - 1e-6
+    cfg = PriorityConfig(patience=10**6, max_rounds=rounds, refit_every=rounds)
+    best, found, _ = priority_search(ctx, 30.0, seed=0, cfg=cfg)
+    assert found <= refit_cost + 1e-9
+    assert found == pytest.approx(float(ctx.evaluator.evaluate(best).costs[ctx.objective][0]))
+    assert check(ctx.problem, ctx.cliques, best).ok.tolist() == [True]
 
 
 def test_priority_search_moves_many_conflicts_at_once() -> None:
