@@ -17,9 +17,9 @@ the same search ended 4-8 % lower on 100-robot warehouses), and every
 ``refit_every`` rounds the best's types are refitted to its directions at the waits
 its schedule has (:func:`~service.core.retype.refit_types`, kept only when cheaper):
 types chosen for the start's directions spend the density budgets where the moved
-robots no longer wait. That lifted ``auto`` at 5 s on generated warehouses of 25-250
-robots from 0.950-0.953 to 0.972-0.977 of the best known (docs/benchmarks.md,
-"Types refitted during priority search").
+robots no longer wait. That lifted ``auto`` on generated warehouses of 25-250 robots
+from 0.951-0.954 to 0.975 of the best known at 5 s, and from 0.872-0.880 to 0.891 at
+1 s (docs/benchmarks.md, "Types refitted during priority search").
 
 Measured (docs/benchmarks.md, "Anytime auto"): as ``auto``'s first stage it beat tabu
 search alone on every generated warehouse and floor at 0.3-3 s (``wh_two_lane`` of 100
