@@ -43,6 +43,7 @@ budgets: its answer would be the same (``reused`` in the raw rows). Under
 from __future__ import annotations
 
 import argparse
+import json
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -67,6 +68,7 @@ from bench.cases import (
 )
 from bench.report import (
     MODEL_STORE,
+    REFERENCE_VERSION,
     JsonCache,
     add_run_args,
     jsonable,
@@ -102,6 +104,9 @@ PORTFOLIOS = ("auto", "auto_2cores")  # the methods held to issue 11's targets
 EARLY = 0.5  # a run ending before this share of its budget stopped on its own
 # A run longer than OVERRUN x its budget + OVERRUN_S is listed as an overrun.
 OVERRUN, OVERRUN_S = 1.1, 0.05
+# The 30-s references of the default generated worlds (made in session 22).
+RESULTS = Path(__file__).resolve().parents[1] / "docs/results/anytime"
+REFERENCES = RESULTS / f"references-r{REFERENCE_VERSION}.json"
 
 
 @dataclass(frozen=True)
@@ -131,12 +136,17 @@ class Config:
     store: Path = MODEL_STORE
     out: Path = Path("docs/results/anytime")
     cache: Path = Path("bench/cache")
+    # Committed references (the cache's own format: request key -> runs) that seed the
+    # cache, so that a fresh machine measures against the same yardstick as the runs in
+    # docs/ instead of making its own (12 min, and never quite the same); None: none.
+    references: Path | None = REFERENCES
 
 
 QUICK = Config(
     budgets=(0.1, 0.3),
     target_budget=None,
     reference_budget=None,
+    references=None,
     sets=("wh_25", "geo_10"),
     per_set=1,
     worlds=("wh_two_lane:10", "floor_dense:10"),
@@ -236,6 +246,8 @@ def run(cfg: Config, progress: bool = True) -> dict[str, Any]:
     warm_up(cfg, cases, policy)
     settle()  # the service's collector policy once warm: the cases held escape full collections
     cache = reference_cache(cfg.cache, "anytime-ref")
+    if cfg.references is not None:
+        cache.seed(json.loads(cfg.references.read_text()))
     rows: list[dict[str, Any]] = []
     for case in tqdm(cases, desc="anytime", unit="problem", disable=not progress):
         refs = reference_rows(case, cfg, policy, cache)
@@ -375,6 +387,9 @@ def report(results: dict[str, Any], out: Path) -> str:
 def _parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="a CI smoke run of about a minute")
+    p.add_argument(
+        "--references", type=Path, help="references (the cache's format) that seed the cache"
+    )
     p.add_argument("--methods", nargs="+", choices=tuple(METHODS))
     p.add_argument("--budgets", type=float, nargs="+", help="seconds per solve")
     p.add_argument("--target-budget", type=float, help=f"also run {TARGET_METHOD} at this budget")

@@ -305,10 +305,13 @@ def seed_references(cache: JsonCache, worlds: Sequence[World], cfg: Config) -> N
             f" not {cfg.objective} at {cfg.ref_budget_s:g} s"
         )
     by_name = {p["name"]: p["references"] for p in problems}
-    for world in worlds:
-        if world.case.name in by_name:
-            key = request_key(world.case, cfg.objective, cfg.ref_budget_s)
-            cache.get(key, lambda name=world.case.name: by_name[name])
+    cache.seed(
+        {
+            request_key(w.case, cfg.objective, cfg.ref_budget_s): by_name[w.case.name]
+            for w in worlds
+            if w.case.name in by_name
+        }
+    )
 
 
 def run(cfg: Config, progress: bool = True) -> dict[str, Any]:

@@ -111,6 +111,14 @@ class JsonCache:
         self.path = path
         self.data: dict[str, Any] = json.loads(path.read_text()) if path.exists() else {}
 
+    def seed(self, entries: dict[str, Any]) -> None:
+        """Store ``entries`` (key -> value) whose keys the cache does not hold yet."""
+        fresh = {k: v for k, v in entries.items() if k not in self.data}
+        if fresh:
+            self.data.update(fresh)
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self.path.write_text(json.dumps(self.data))
+
     def get(self, key: str, compute: Callable[[], Any]) -> Any:
         """The stored value of ``key``, or ``compute()``'s, stored first."""
         if key not in self.data:

@@ -82,6 +82,21 @@ def test_a_long_reference_run_joins_the_yardstick_of_generated_worlds_once(
     assert reference_rows(generated, replace(cfg, reference_budget=None), None, cache) == []
 
 
+def test_committed_references_seed_a_cache_without_overwriting_it(tmp_path: Path) -> None:
+    """The committed yardstick is keyed as the cache is (request, objective, 30 s) and holds
+    REFERENCE_METHOD's runs; seeding adds what a cache lacks and keeps what it has."""
+    committed = json.loads(anytime.REFERENCES.read_text())
+    assert len(committed) >= 20
+    assert all(key.endswith("-avg_completion-30s") for key in committed)
+    assert {r["method"] for runs in committed.values() for r in runs} == {anytime.REFERENCE_METHOD}
+    cache = JsonCache(tmp_path / "refs.json")
+    mine = next(iter(committed))
+    cache.get(mine, lambda: [{"cost": 1.0}])
+    cache.seed(committed)
+    again = JsonCache(tmp_path / "refs.json")  # written through
+    assert again.data[mine] == [{"cost": 1.0}] and again.data.keys() == committed.keys()
+
+
 def test_targets_group_warehouses_and_dense_floors() -> None:
     assert target_group("wh_25") == target_group("wh_two_way 250") == "warehouse"
     assert target_group("geo_dense_25") == target_group("floor_dense 50") == "dense geometric"
