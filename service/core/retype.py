@@ -9,7 +9,9 @@ so far (its real waits, which move once the types change), a few rounds, each ke
 when cheaper. Measured on the learned model's cheapest of 100 draws on the
 generalization worlds of 100 and 250 robots (docs/benchmarks.md, "Following-type where it
 spares most"): planned times alone 4-9 % cheaper on average, with three rounds at updated
-times 10-14 %, in 1-33 ms.
+times 10-14 %, in 1-33 ms. Robot-priority search refits its best this way as it goes
+(:mod:`service.solvers.priority`; docs/benchmarks.md, "Types refitted during priority
+search").
 """
 
 from __future__ import annotations
