@@ -50,6 +50,7 @@ checked again there (see :func:`lns_search`): which steps overlap depends on tim
 from __future__ import annotations
 
 import time
+from collections.abc import Iterable
 from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass, replace
 from typing import NamedTuple
@@ -291,7 +292,7 @@ class _Neighbourhood:
     ) -> None:
         # Data.
         problem = ctx.problem
-        self.robots = robots
+        self.robots = robots  # (k,) re-planned
         self.conflicts = fleet.conflicts_of(robots)  # (K,) freed
         events = fleet.events_of(robots)  # (N,) the picked robots' events, by robot
         model = cp_model.CpModel()
@@ -534,9 +535,7 @@ def lns_search(
                     if plateau:
                         break
                     count, stalled = min(int(count * GROWTH) + 1, MAX_ROBOTS), 0
-                busy = np.zeros(n_robots, dtype=bool)  # (R,) robots of the running ones
-                for running_one, _, _ in running.values():
-                    busy[running_one.robots] = True
+                busy = _in_flight(running.values(), n_robots)
                 if busy.all():
                     break
                 robots = fleet.pick(rng, current, count, busy)
@@ -567,6 +566,16 @@ def lns_search(
                 wait(running)  # at most ctx.workers - 1 others, each within the deadline
                 return LnsResult(best, current.cost, steps, True)
     return LnsResult(best, current.cost, steps, False)
+
+
+def _in_flight(
+    running: Iterable[tuple[_Neighbourhood, _Incumbent, bool]], n_robots: int
+) -> np.ndarray:
+    """(R,) bool: the robots the ``running`` sub-problems re-plan."""
+    busy = np.zeros(n_robots, dtype=bool)
+    for neighbourhood, _, _ in running:
+        busy[neighbourhood.robots] = True
+    return busy
 
 
 def _cheaper(
