@@ -267,10 +267,14 @@ def test_an_answer_over_a_density_budget_is_never_taken() -> None:
     assert lns._cheaper(ctx, fleet, cheap, start, ties=True) is not None
 
 
+@pytest.mark.parametrize("workers", [1, 2])
 @pytest.mark.parametrize("objective", ["avg_completion", "avg_delay"])
 def test_auto_runs_lns_instead_of_cp_sat_from_its_threshold(
-    objective: str, monkeypatch: pytest.MonkeyPatch
+    objective: str, workers: int, monkeypatch: pytest.MonkeyPatch
 ) -> None:
+    """From lns_min_conflicts LNS runs to the deadline instead of CP-SAT, with one worker
+    or two (two sub-problems at once): the answer is checked, on time, never below the
+    proven optimum."""
     import service.solvers.portfolio as portfolio
 
     def no_cp_sat(*args: object, **kwargs: object) -> object:
@@ -290,7 +294,7 @@ def test_auto_runs_lns_instead_of_cp_sat_from_its_threshold(
         "objective": objective,
         "options": {"solver": "auto", "time_limit_s": 1.0},
     }
-    policy = DispatchPolicy(exact_max_conflicts=0, lns_min_conflicts=1)
+    policy = DispatchPolicy(exact_max_conflicts=0, lns_min_conflicts=1, exact_workers=workers)
     begin = time.perf_counter()
     answer = dispatch(ScheduleRequest.model_validate(body), policy)
     assert time.perf_counter() - begin <= 1.1 + 0.15
