@@ -45,7 +45,7 @@ def test_generated_worlds_measure_against_the_best_found_conformance_against_the
 def test_proven_or_early_answers_stand_for_larger_budgets(monkeypatch) -> None:
     calls = []
 
-    def fake(method, case, budget, cfg, policy):
+    def fake(method, case, budget, cfg, policy, seed=None):
         calls.append(budget)
         runtime = 0.05 if budget >= 3 else budget  # stops on its own from 3 s on
         return {**_raw(method, 10.0 / budget, budget, optimal=False), "runtime_s": runtime}
@@ -64,7 +64,7 @@ def test_a_long_reference_run_joins_the_yardstick_of_generated_worlds_once(
 ) -> None:
     calls = []
 
-    def fake(method, case, budget, cfg, policy):
+    def fake(method, case, budget, cfg, policy, seed=None):
         calls.append((method, budget))
         return _raw(method, 9.0, budget)
 
@@ -119,6 +119,35 @@ def test_quick_defaults_and_flags() -> None:
         QUICK,
     )
     assert cfg == replace(Config(), methods=("auto",), budgets=(1.0,), worlds=("wh_mixed:50",))
+
+
+def test_each_solver_seed_runs_every_method_and_budget(monkeypatch, tmp_path: Path) -> None:
+    """With solver_seeds 2 every method runs every budget with seed base_seed and the
+    next; the rows carry their seed, one yardstick spans them, the report names the range."""
+    calls = []
+
+    def fake(method, case, budget, cfg, policy, seed=None):
+        calls.append((method, budget, seed))
+        return {**_raw(method, case.ref_cost * (1 + seed / 10), budget), "seed": seed,
+                "name": case.name, "family": case.family, "conformance": True,
+                "ref_runtime_s": None}  # fmt: skip
+
+    cases = conformance_cases(("wh_25",), per_set=1)
+    monkeypatch.setattr(anytime, "run_method", fake)
+    monkeypatch.setattr(anytime, "cases_of", lambda cfg: cases)
+    monkeypatch.setattr(anytime, "service_policy", lambda store: None)
+    monkeypatch.setattr(anytime, "warm_up", lambda cfg, cases, policy: None)
+    args = ["--solver-seeds", "2", "--seed", "1", "--methods", "auto", "tabu", "--budgets", "1"]
+    cfg = config_from_args(_parse_args(args), Config(), QUICK)
+    assert cfg == replace(Config(), base_seed=1, solver_seeds=2, methods=("auto", "tabu"),
+                          budgets=(1.0,))  # fmt: skip
+    cfg = replace(cfg, target_budget=None, references=None, cache=tmp_path)
+    results = anytime.run(cfg, progress=False)
+    assert calls == [("auto", 1.0, 1), ("auto", 1.0, 2), ("tabu", 1.0, 1), ("tabu", 1.0, 2)]
+    assert [r["seed"] for r in results["rows"]] == [1, 2, 1, 2]
+    assert [r["ratio"] for r in results["rows"]] == pytest.approx([1 / 1.1, 1 / 1.2] * 2)
+    assert anytime.seeds_text(results["config"]).startswith("solver seeds 1-2")
+    assert anytime.seeds_text({"base_seed": 0}) == "seed 0"  # runs from before the option
 
 
 def test_worlds_are_derived_once_and_cached(tmp_path: Path) -> None:
