@@ -68,6 +68,17 @@ class PriorityConfig:
 
     candidates: int = 8  # robots shifted per round, one each (a batched evaluation)
     step: float = 0.1  # offset standard deviation, as a share of the problem's time span
+    # The step from wide_from conflicts (the 250-robot warehouses: 11,000-23,000; where
+    # ``auto`` gives the search its whole budget, above exact_stage_max_conflicts).
+    # Measured (session 23; ``auto``, cost ratio against the best known, 0.1 -> 0.2): six
+    # 250-robot warehouses of the bench 1 s 0.8876 -> 0.9040 (three seeds; 0.05: 0.8459,
+    # 0.3: 0.8774 where 0.2 had 0.8958), 5 s 0.9608 -> 0.9807 (two seeds, better on all
+    # six); eight 250-robot worlds of kinds not tuned on (wh_one_way, wh_mixed, wh_parked)
+    # 1 s 0.9341 -> 0.9641 (three seeds, better on six). Below it 0.1 stays: 100-robot
+    # warehouses 1 s +0.008, 5 s -0.007 (noise, LNS decides there), 25-50 robots 1 s
+    # -0.005 to -0.007.
+    wide_step: float = 0.2
+    wide_from: int = 10_000
     # Rounds without a cheaper candidate before stopping (and tabu search taking over in
     # priority_tabu). 30 until session 22; with the types refitted the search goes on
     # improving after such stalls: ``auto`` at 5 s on six 250-robot warehouses (two seeds)
@@ -173,7 +184,8 @@ def priority_search(
     flips = RankFlips(p)
     offsets = np.zeros(p.n_robots)  # (R,) the current (best) offsets
     ranks = decoder.repair(base[None])[0]  # (V,) the current best's repaired ranks
-    sigma = cfg.step * float(p.node_exit.max() - p.node_enter.min())
+    step = cfg.wide_step if p.n_conflicts >= cfg.wide_from else cfg.step
+    sigma = step * float(p.node_exit.max() - p.node_enter.min())
     draws = 2 * cfg.candidates  # a third of single-robot shifts reorder nothing: drawn over
     refit_every = cfg.refit_every if budget_s >= cfg.refit_min_s else 0
     refit_s = 0.0  # the last refit's seconds: the search stops that much early for the final one

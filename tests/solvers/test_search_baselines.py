@@ -7,6 +7,7 @@ sees every valid assignment and must match the brute-force optimum.
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -124,6 +125,23 @@ def test_priority_search_refits_its_types_every_refit_every_rounds() -> None:
     assert found <= refit_cost + 1e-9
     assert found == pytest.approx(float(ctx.evaluator.evaluate(best).costs[ctx.objective][0]))
     assert check(ctx.problem, ctx.cliques, best).ok.tolist() == [True]
+
+
+def test_priority_search_steps_wide_from_its_size_threshold() -> None:
+    """From wide_from conflicts the offsets are drawn with wide_step, below with step: the
+    same search, round for round, as the other step set as the one used."""
+    ctx = context(world_request("wh_two_way", 25, 60), "avg_completion", seed=0)
+    n = ctx.problem.n_conflicts
+    fixed = PriorityConfig(patience=10**6, max_rounds=30)
+
+    def run(cfg: PriorityConfig) -> tuple:
+        best, found, rounds = priority_search(ctx, 30.0, seed=3, cfg=cfg)
+        return best.a_first.tobytes(), best.following.tobytes(), found, rounds
+
+    wide = replace(fixed, wide_from=n, wide_step=0.3)
+    assert run(wide) == run(replace(fixed, step=0.3, wide_from=n + 1))
+    assert run(replace(wide, wide_from=n + 1)) == run(replace(fixed, wide_from=n + 1))
+    assert run(wide) != run(replace(wide, wide_from=n + 1))  # the step moves the search
 
 
 def test_priority_search_moves_many_conflicts_at_once() -> None:
