@@ -519,24 +519,14 @@ def lns_search(
     rng = np.random.default_rng(seed)
     n_robots = ctx.problem.n_robots
     best, current = start, _Incumbent.start(ctx, fleet, start)
-    steps = stalled = 0
-    count, largest = LNS_ROBOTS, min(MAX_ROBOTS, n_robots)
-    plateau = False
+    sizes, steps = _Sizes(n_robots, converge), 0
     running: dict[Future[_Solved | None], tuple[_Neighbourhood, _Incumbent, bool]] = {}
     with ThreadPoolExecutor(max_workers=ctx.workers) as pool:
         while True:
-            while (
-                not plateau
-                and len(running) < ctx.workers
-                and deadline - time.monotonic() > MIN_STEP_S
-            ):
-                if stalled * count >= STALL_COVER * n_robots:
-                    plateau = converge and count >= largest
-                    if plateau:
-                        break
-                    count, stalled = min(int(count * GROWTH) + 1, MAX_ROBOTS), 0
+            while len(running) < ctx.workers and deadline - time.monotonic() > MIN_STEP_S:
                 busy = _in_flight(running.values(), n_robots)
-                if busy.all():
+                count = None if busy.all() else sizes.next()
+                if count is None:
                     break
                 robots = fleet.pick(rng, current, count, busy)
                 neighbourhood = _Neighbourhood(ctx, fleet, robots, current)
@@ -551,21 +541,45 @@ def lns_search(
             job = next(iter(wait(running, return_when=FIRST_COMPLETED).done))
             neighbourhood, base, whole = running.pop(job)
             solved = job.result()
-            if solved is None:
-                stalled += 1
-                continue
             # A proof holds only for the incumbent the whole problem was built on.
-            proven = solved.optimal and whole and base is current
-            found = neighbourhood.onto(current, solved)
-            better = _cheaper(ctx, fleet, current, found, proven)
+            proven = solved is not None and solved.optimal and whole and base is current
+            found = None if solved is None else neighbourhood.onto(current, solved)
+            better = None if found is None else _cheaper(ctx, fleet, current, found, proven)
+            sizes.record(better is not None)
             if better is None:
-                stalled += 1
                 continue
-            best, current, stalled = found, better, 0
+            best, current = found, better
             if proven:
                 wait(running)  # at most ctx.workers - 1 others, each within the deadline
                 return LnsResult(best, current.cost, steps, True)
     return LnsResult(best, current.cost, steps, False)
+
+
+@dataclass
+class _Sizes:
+    """How many robots the next step frees: LNS_ROBOTS at first, GROWTH times as many
+    (up to MAX_ROBOTS) after a plateau, i.e. steps without improvement that together
+    freed STALL_COVER times the fleet; with ``converge``, none from a plateau at the
+    largest size (min(MAX_ROBOTS, fleet)) on: the search ends."""
+
+    n_robots: int
+    converge: bool
+    count: int = LNS_ROBOTS
+    stalled: int = 0  # steps without improvement at this size
+    ended: bool = False
+
+    def next(self) -> int | None:
+        """The next step's robot count (None: converged)."""
+        if not self.ended and self.stalled * self.count >= STALL_COVER * self.n_robots:
+            largest = min(MAX_ROBOTS, self.n_robots)
+            self.ended = self.converge and self.count >= largest
+            if not self.ended:
+                self.count, self.stalled = min(int(self.count * GROWTH) + 1, MAX_ROBOTS), 0
+        return None if self.ended else self.count
+
+    def record(self, improved: bool) -> None:
+        """A step's outcome: an improvement restarts the stall count."""
+        self.stalled = 0 if improved else self.stalled + 1
 
 
 def _in_flight(
