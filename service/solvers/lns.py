@@ -520,7 +520,8 @@ def lns_search(
     n_robots = ctx.problem.n_robots
     best, current = start, _Incumbent.start(ctx, fleet, start)
     sizes, steps = _Sizes(n_robots, converge), 0
-    running: dict[Future[_Solved | None], tuple[_Neighbourhood, _Incumbent, bool]] = {}
+    # Each running sub-problem and the incumbent it was built on.
+    running: dict[Future[_Solved | None], tuple[_Neighbourhood, _Incumbent]] = {}
     with ThreadPoolExecutor(max_workers=ctx.workers) as pool:
         while True:
             while len(running) < ctx.workers and deadline - time.monotonic() > MIN_STEP_S:
@@ -534,14 +535,15 @@ def lns_search(
                 if left <= 0:
                     break
                 job = pool.submit(neighbourhood.solve, min(SUB_TIME_S, left), seed + steps)
-                running[job] = (neighbourhood, current, robots.size == n_robots)
+                running[job] = (neighbourhood, current)
                 steps += 1
             if not running:
                 break
             job = next(iter(wait(running, return_when=FIRST_COMPLETED).done))
-            neighbourhood, base, whole = running.pop(job)
+            neighbourhood, base = running.pop(job)
             solved = job.result()
             # A proof holds only for the incumbent the whole problem was built on.
+            whole = neighbourhood.robots.size == n_robots
             proven = solved is not None and solved.optimal and whole and base is current
             found = None if solved is None else neighbourhood.onto(current, solved)
             better = None if found is None else _cheaper(ctx, fleet, current, found, proven)
@@ -582,12 +584,10 @@ class _Sizes:
         self.stalled = 0 if improved else self.stalled + 1
 
 
-def _in_flight(
-    running: Iterable[tuple[_Neighbourhood, _Incumbent, bool]], n_robots: int
-) -> np.ndarray:
+def _in_flight(running: Iterable[tuple[_Neighbourhood, _Incumbent]], n_robots: int) -> np.ndarray:
     """(R,) bool: the robots the ``running`` sub-problems re-plan."""
     busy = np.zeros(n_robots, dtype=bool)
-    for neighbourhood, _, _ in running:
+    for neighbourhood, _ in running:
         busy[neighbourhood.robots] = True
     return busy
 
