@@ -497,11 +497,17 @@ class LnsResult(NamedTuple):
 
 
 def lns_search(
-    ctx: SolveContext, start: Assignments, deadline: float, seed: int, converge: bool = False
+    ctx: SolveContext,
+    start: Assignments,
+    deadline: float,
+    seed: int,
+    converge: bool = False,
+    robots: int = LNS_ROBOTS,
 ) -> LnsResult:
     """LNS from the valid ``start`` until ``deadline`` (monotonic), or with ``converge``
     until a plateau at the largest neighbourhood (min(MAX_ROBOTS, fleet)); at once when a
-    step that freed every robot (the whole problem, nothing held) is proven optimal.
+    step that freed every robot (the whole problem, nothing held) is proven optimal. The
+    first neighbourhoods free ``robots`` robots.
 
     ``ctx.workers`` sub-problems are solved at once, each in a thread (CP-SAT releases
     the GIL): while one is solved the next is built, from robots that no running one
@@ -519,7 +525,7 @@ def lns_search(
     rng = np.random.default_rng(seed)
     n_robots = ctx.problem.n_robots
     best, current = start, _Incumbent.start(ctx, fleet, start)
-    sizes, steps = _Sizes(n_robots, converge), 0
+    sizes, steps = _Sizes(n_robots, converge, robots), 0
     # Each running sub-problem and the incumbent it was built on.
     running: dict[Future[_Solved | None], tuple[_Neighbourhood, _Incumbent]] = {}
     with ThreadPoolExecutor(max_workers=ctx.workers) as pool:
@@ -559,7 +565,8 @@ def lns_search(
 
 @dataclass
 class _Sizes:
-    """How many robots the next step frees: LNS_ROBOTS at first, GROWTH times as many
+    """How many robots the next step frees: ``count`` at first (LNS_ROBOTS unless the
+    search is told otherwise), GROWTH times as many
     (up to MAX_ROBOTS) after a plateau, i.e. steps without improvement that together
     freed STALL_COVER times the fleet; with ``converge``, none from a plateau at the
     largest size (min(MAX_ROBOTS, fleet)) on: the search ends."""

@@ -57,7 +57,7 @@ import numpy as np
 from service.core.assignment import Assignments
 from service.core.decompose import DECOMPOSABLE, Part, join, parts
 from service.solvers.exact import build_seconds, improve
-from service.solvers.lns import LNS_OBJECTIVES, lns_search
+from service.solvers.lns import LNS_OBJECTIVES, LNS_ROBOTS, lns_search
 from service.solvers.registry import SolveContext, SolverOutput, get_solver, register
 from service.solvers.tabu import plain_start, tabu_search
 
@@ -76,6 +76,21 @@ MIN_POLISH_S = 0.02
 # with 2-3x, and the first stage given that time reached 0.97 instead of 0.92 on the
 # two-lane ones; with 3 s and more it found the best answers, and still runs there.
 EXACT_TIME_PER_BUILD = 4
+# Above ``exact_stage_max_conflicts`` (the 250-robot warehouses: 11,000-23,000 conflicts)
+# LNS follows the first stage only where robots meet few others (conflicts per robot, each
+# conflict counted for both, at most LARGE_LNS_CONFLICTS_PER_ROBOT) and the budget leaves it
+# LARGE_LNS_MIN_S, its first neighbourhoods of LARGE_LNS_ROBOTS robots (a step there frees
+# ~90-180 conflicts per robot, against ~40-80 at 100 robots). Measured (session 24; auto, 5 s,
+# cost ratio against the best of the runs and the 30-s references, 1 s and 3 s below):
+# with LNS after 30 % of priority search, 4 solver seeds, the two-lane warehouses of 250
+# robots (92-97 conflicts per robot) 0.877 -> 0.940 (better on all three), the two-way ones
+# (165-175) 0.974 -> 0.955 (worse on all three); on kinds not tuned on (2 seeds) the two
+# wh_mixed worlds of 91-94 per robot 0.952 -> 0.987, the six of 166-185 (wh_one_way,
+# wh_parked, wh_mixed) 0.976 -> 0.955. With 0.7 s of LNS (a 1-s budget) two-lane 0.90 ->
+# 0.78; with 2.1 s (3 s) 0.946 -> 0.944 (one seed).
+LARGE_LNS_CONFLICTS_PER_ROBOT = 130.0
+LARGE_LNS_MIN_S = 3.0
+LARGE_LNS_ROBOTS = 4
 # Share of the time after the first stage that LNS may take, below lns_min_conflicts,
 # before the CP-SAT stage (which proves optimality where it can): LNS stops sooner when
 # it converges (a plateau at its largest neighbourhood). Measured (session 19, 25
@@ -134,7 +149,7 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
     uses_lns = (
         ctx.objective in LNS_OBJECTIVES
         and ctx.exact_max_conflicts < problem.n_conflicts
-        and not too_large
+        and (not too_large or _lns_pays_above_cap(ctx, deadline))
     )
     lns_only = uses_lns and problem.n_conflicts >= ctx.lns_min_conflicts
     # The least time worth a CP-SAT stage (inf: none at this size).
@@ -157,7 +172,8 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
         until = (
             deadline if last else min(deadline - left * (1 - MID_LNS_SHARE), deadline - exact_min_s)
         )
-        found = lns_search(ctx, best.assignment, until, ctx.seed, converge=not last)
+        robots = LARGE_LNS_ROBOTS if too_large else LNS_ROBOTS
+        found = lns_search(ctx, best.assignment, until, ctx.seed, converge=not last, robots=robots)
         steps = found.steps
         if found.cost < cost or found.optimal:
             best, cost = replace(best, assignment=found.best), found.cost
@@ -187,6 +203,17 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
         return replace(best, optimal=False, detail=_detail(stages, verdict))
     improved, verdict = improve(ctx, best, left)
     return replace(improved, detail=_detail(stages, verdict))
+
+
+def _lns_pays_above_cap(ctx: SolveContext, deadline: float) -> bool:
+    """Whether LNS follows the first stage of a problem above ``exact_stage_max_conflicts``
+    (``deadline`` monotonic): where its robots meet few others (at most
+    LARGE_LNS_CONFLICTS_PER_ROBOT conflicts each on average) and the budget leaves it at
+    least LARGE_LNS_MIN_S after the first stage."""
+    problem = ctx.problem
+    per_robot = 2 * problem.n_conflicts / problem.n_robots
+    left = (1 - FIRST_STAGE_SHARE) * (deadline - time.monotonic())
+    return per_robot <= LARGE_LNS_CONFLICTS_PER_ROBOT and left >= LARGE_LNS_MIN_S
 
 
 def _polish(

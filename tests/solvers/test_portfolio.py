@@ -23,6 +23,7 @@ from service.core.decompose import join, parts
 from service.core.evaluate import Evaluator
 from service.core.problem import problem_from_request
 from service.core.schemas import OBJECTIVES, ScheduleRequest
+from service.solvers import lns
 from service.solvers.dispatch import DispatchPolicy, dispatch
 from service.solvers.registry import SolveContext
 from tests.reference import feasible_assignments, reference_problem, tiny_request
@@ -139,6 +140,36 @@ def test_auto_runs_no_cp_sat_stage_above_its_cap(monkeypatch: pytest.MonkeyPatch
     assert answer.solver.name == "auto" and not answer.solver.optimal
     assert "no CP-SAT stage above 10 conflicts" in answer.solver.detail
     assert answer.cost >= line["ref_cost"] * (1 - 1e-9)
+
+
+@pytest.mark.parametrize(
+    ("per_robot", "min_s", "lns_runs"), [(10.0, 0.5, True), (5.0, 0.5, False), (10.0, 5.0, False)]
+)
+def test_above_its_cap_auto_runs_lns_where_robots_meet_few_and_time_allows(
+    per_robot: float, min_s: float, lns_runs: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Above exact_stage_max_conflicts LNS follows the first stage, with its large-problem
+    neighbourhoods, only where the conflicts per robot are at most the threshold (wh_25/0:
+    7.0) and the time left after the first stage is at least LARGE_LNS_MIN_S; else the
+    first stage and tabu search keep the budget, as before."""
+    import service.solvers.portfolio as portfolio
+
+    sizes: list[int] = []
+
+    def lns_search(*args: Any, **kwargs: Any) -> Any:
+        sizes.append(kwargs["robots"])
+        return lns.lns_search(*args, **kwargs)
+
+    monkeypatch.setattr(portfolio, "lns_search", lns_search)
+    monkeypatch.setattr(portfolio, "LARGE_LNS_CONFLICTS_PER_ROBOT", per_robot)
+    monkeypatch.setattr(portfolio, "LARGE_LNS_MIN_S", min_s)
+    line = json.loads((DATA / "wh_25.jsonl").read_text().splitlines()[0])
+    body = {**line["request"], "options": {"solver": "auto", "time_limit_s": 1.0}}
+    policy = DispatchPolicy(exact_max_conflicts=0, exact_stage_max_conflicts=10)
+    answer = dispatch(ScheduleRequest.model_validate(body), policy)
+    assert sizes == ([portfolio.LARGE_LNS_ROBOTS] if lns_runs else [])
+    assert answer.cost >= line["ref_cost"] * (1 - 1e-9)
+    assert answer.checks.acyclic and answer.checks.density
 
 
 def test_auto_uses_its_budget_when_tabu_stops_early_and_no_cp_sat_follows() -> None:
