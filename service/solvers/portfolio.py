@@ -22,13 +22,17 @@ comes first, improving in stages:
    proves optimality (a step that freed every robot of a fleet of at most
    ``lns.MAX_ROBOTS``, proven by CP-SAT) or MID_LNS_SHARE of the time left has
    passed, then
+   Above ``exact_stage_max_conflicts`` it follows the first stage to the deadline only
+   where the robots meet few others and the budget leaves it LARGE_LNS_MIN_S (see
+   LARGE_LNS_CONFLICTS_PER_ROBOT), starting from smaller neighbourhoods;
 4. **exact**: CP-SAT hinted with the best answer so far, for the rest of the
    budget; it proves optimality where it can (``solver.optimal`` is true only
    then) and never returns worse than its hint (the cheaper is kept, by the one
    evaluator). It is skipped when what is left is less than EXACT_TIME_PER_BUILD
    times its model-building estimate (``exact.build_seconds``), and above
    ``exact_stage_max_conflicts`` (where it was measured to improve nothing within
-   seconds); the first stage then gets the whole budget, and tabu search polishes
+   seconds); the first stage then gets the whole budget (unless LNS follows it), and
+   tabu search polishes
    its answer with what it leaves, restarted from the best with the next seed
    whenever it stops on its own, so that an unproven answer comes at the deadline,
    not before.
