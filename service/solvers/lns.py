@@ -566,10 +566,10 @@ def lns_search(
 @dataclass
 class _Sizes:
     """How many robots the next step frees: ``count`` at first (LNS_ROBOTS unless the
-    search is told otherwise), GROWTH times as many
-    (up to MAX_ROBOTS) after a plateau, i.e. steps without improvement that together
-    freed STALL_COVER times the fleet; with ``converge``, none from a plateau at the
-    largest size (min(MAX_ROBOTS, fleet)) on: the search ends."""
+    search is told otherwise), GROWTH times as many (up to MAX_ROBOTS) after a plateau,
+    i.e. steps without improvement that together freed STALL_COVER times the fleet; with
+    ``converge``, none from a plateau at the largest size (min(MAX_ROBOTS, fleet)) on:
+    the search ends."""
 
     n_robots: int
     converge: bool

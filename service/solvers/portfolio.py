@@ -18,24 +18,23 @@ comes first, improving in stages:
    a few robots at a time from the best answer so far (:mod:`service.solvers.lns`).
    From ``lns_min_conflicts`` conflicts until the deadline, instead of the next
    stage: on whole models of this size one CP-SAT worker barely moves from its
-   hint. Below, until it converges (a plateau at its largest neighbourhood),
-   proves optimality (a step that freed every robot of a fleet of at most
-   ``lns.MAX_ROBOTS``, proven by CP-SAT) or MID_LNS_SHARE of the time left has
+   hint. Above ``exact_stage_max_conflicts`` too, but only where the robots meet few
+   others and the budget leaves it LARGE_LNS_MIN_S (see
+   LARGE_LNS_CONFLICTS_PER_ROBOT), from smaller neighbourhoods. Below
+   ``lns_min_conflicts``, until it converges (a plateau at its largest
+   neighbourhood), proves optimality (a step that freed every robot of a fleet of at
+   most ``lns.MAX_ROBOTS``, proven by CP-SAT) or MID_LNS_SHARE of the time left has
    passed, then
-   Above ``exact_stage_max_conflicts`` it follows the first stage to the deadline only
-   where the robots meet few others and the budget leaves it LARGE_LNS_MIN_S (see
-   LARGE_LNS_CONFLICTS_PER_ROBOT), starting from smaller neighbourhoods;
 4. **exact**: CP-SAT hinted with the best answer so far, for the rest of the
    budget; it proves optimality where it can (``solver.optimal`` is true only
    then) and never returns worse than its hint (the cheaper is kept, by the one
    evaluator). It is skipped when what is left is less than EXACT_TIME_PER_BUILD
    times its model-building estimate (``exact.build_seconds``), and above
    ``exact_stage_max_conflicts`` (where it was measured to improve nothing within
-   seconds); the first stage then gets the whole budget (unless LNS follows it), and
-   tabu search polishes
-   its answer with what it leaves, restarted from the best with the next seed
-   whenever it stops on its own, so that an unproven answer comes at the deadline,
-   not before.
+   seconds); the first stage then gets the whole budget (unless LNS follows it),
+   and tabu search polishes its answer with what it leaves, restarted from the best
+   with the next seed whenever it stops on its own, so that an unproven answer comes
+   at the deadline, not before.
 
 Small problems go straight to the exact stage (CP-SAT proves them in milliseconds).
 Robots that share no conflict, directly or through others, form independent
