@@ -18,9 +18,9 @@ comes first, improving in stages:
    a few robots at a time from the best answer so far (:mod:`service.solvers.lns`).
    From ``lns_min_conflicts`` conflicts until the deadline, instead of the next
    stage: on whole models of this size one CP-SAT worker barely moves from its
-   hint. Above ``exact_stage_max_conflicts`` too, but only where the robots meet few
-   others and the budget leaves it LARGE_LNS_MIN_S (see
-   LARGE_LNS_CONFLICTS_PER_ROBOT), from smaller neighbourhoods. Below
+   hint. Above ``exact_stage_max_conflicts`` too, from smaller neighbourhoods, where
+   the budget leaves it time in proportion to the conflicts per robot (see
+   LARGE_LNS_S_PER_CONFLICT). Below
    ``lns_min_conflicts``, until it converges (a plateau at its largest
    neighbourhood), proves optimality (a step that freed every robot of a fleet of at
    most ``lns.MAX_ROBOTS``, proven by CP-SAT) or MID_LNS_SHARE of the time left has
@@ -80,18 +80,24 @@ MIN_POLISH_S = 0.02
 # two-lane ones; with 3 s and more it found the best answers, and still runs there.
 EXACT_TIME_PER_BUILD = 4
 # Above ``exact_stage_max_conflicts`` (the 250-robot warehouses: 11,000-23,000 conflicts)
-# LNS follows the first stage only where robots meet few others (conflicts per robot, each
-# conflict counted for both, at most LARGE_LNS_CONFLICTS_PER_ROBOT) and the budget leaves it
-# LARGE_LNS_MIN_S, its first neighbourhoods of LARGE_LNS_ROBOTS robots (a step there frees
-# ~90-180 conflicts per robot, against ~40-80 at 100 robots). Measured (session 24; auto, 5 s,
-# cost ratio against the best of the runs and the 30-s references, 1 s and 3 s below):
-# with LNS after 30 % of priority search, 4 solver seeds, the two-lane warehouses of 250
-# robots (92-97 conflicts per robot) 0.877 -> 0.940 (better on all three), the two-way ones
-# (165-175) 0.974 -> 0.955 (worse on all three); on kinds not tuned on (2 seeds) the two
-# wh_mixed worlds of 91-94 per robot 0.952 -> 0.987, the six of 166-185 (wh_one_way,
-# wh_parked, wh_mixed) 0.976 -> 0.955. With 0.7 s of LNS (a 1-s budget) two-lane 0.90 ->
-# 0.78; with 2.1 s (3 s) 0.946 -> 0.944 (one seed).
-LARGE_LNS_CONFLICTS_PER_ROBOT = 130.0
+# LNS follows the first stage where the time left after it is at least
+# LARGE_LNS_S_PER_CONFLICT seconds per conflict a robot has on average (each conflict
+# counted for both robots), its first neighbourhoods of LARGE_LNS_ROBOTS robots: a step
+# frees about that many conflicts per robot it re-plans (~90-180 there, ~40-80 at 100
+# robots), so it costs in proportion, and LNS needs a few dozen steps to pass priority
+# search, whose rounds slow down less with the density. Measured (session 24; auto, cost
+# ratio against the best of the runs and the 30-s references; LNS after 30 % of priority
+# search against priority search alone): two-lane warehouses of 250 robots (92-97
+# conflicts per robot) 1 s 0.90 -> 0.78 (2 seeds), 3 s 0.946 -> 0.944 (1 seed), 5 s 0.877
+# -> 0.940 (4 seeds, better on all three), 10 s 0.815 -> 0.967 (2 seeds); two-way ones
+# (165-175) 1 s 0.93 -> 0.80, 3 s 0.968 -> 0.941, 5 s 0.974 -> 0.955 (worse on all three),
+# 10 s 0.929 -> 0.964 (better on all three); at 5 s on kinds not tuned on (2 seeds) the
+# two wh_mixed worlds of 91-94 per robot 0.952 -> 0.987, the six of 166-185 (wh_one_way,
+# wh_parked, wh_mixed) 0.976 -> 0.955. So LNS from ~2.1-3.5 s left at ~95 per robot and
+# from 3.5-7 s at ~175: 0.03 s per conflict per robot (2.9 and 5.3 s; budgets of 4.1 and
+# 7.5 s), and never with less than LARGE_LNS_MIN_S left (with 2.1 s it broke even at
+# best; sparser fleets than these were not measured).
+LARGE_LNS_S_PER_CONFLICT = 0.03
 LARGE_LNS_MIN_S = 3.0
 LARGE_LNS_ROBOTS = 4
 # Share of the time after the first stage that LNS may take, below lns_min_conflicts,
@@ -210,13 +216,13 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
 
 def _lns_pays_above_cap(ctx: SolveContext, deadline: float) -> bool:
     """Whether LNS follows the first stage of a problem above ``exact_stage_max_conflicts``
-    (``deadline`` monotonic): where its robots meet few others (at most
-    LARGE_LNS_CONFLICTS_PER_ROBOT conflicts each on average) and the budget leaves it at
-    least LARGE_LNS_MIN_S after the first stage."""
+    (``deadline`` monotonic): where the time left after the first stage is at least
+    LARGE_LNS_S_PER_CONFLICT seconds per conflict a robot has on average, and at least
+    LARGE_LNS_MIN_S."""
     problem = ctx.problem
     per_robot = 2 * problem.n_conflicts / problem.n_robots
     left = (1 - FIRST_STAGE_SHARE) * (deadline - time.monotonic())
-    return per_robot <= LARGE_LNS_CONFLICTS_PER_ROBOT and left >= LARGE_LNS_MIN_S
+    return left >= max(LARGE_LNS_MIN_S, LARGE_LNS_S_PER_CONFLICT * per_robot)
 
 
 def _polish(

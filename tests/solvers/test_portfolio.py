@@ -142,16 +142,15 @@ def test_auto_runs_no_cp_sat_stage_above_its_cap(monkeypatch: pytest.MonkeyPatch
     assert answer.cost >= line["ref_cost"] * (1 - 1e-9)
 
 
-@pytest.mark.parametrize(
-    ("per_robot", "min_s", "lns_runs"), [(10.0, 0.5, True), (5.0, 0.5, False), (10.0, 5.0, False)]
-)
-def test_above_its_cap_auto_runs_lns_where_robots_meet_few_and_time_allows(
-    per_robot: float, min_s: float, lns_runs: bool, monkeypatch: pytest.MonkeyPatch
+@pytest.mark.parametrize(("per_conflict", "lns_runs"), [(0.05, True), (0.2, False)])
+def test_above_its_cap_auto_runs_lns_where_time_allows_for_the_density(
+    per_conflict: float, lns_runs: bool, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """Above exact_stage_max_conflicts LNS follows the first stage, with its large-problem
-    neighbourhoods, only where the conflicts per robot are at most the threshold (wh_25/0:
-    7.0) and the time left after the first stage is at least LARGE_LNS_MIN_S; else the
-    first stage and tabu search keep the budget, as before."""
+    neighbourhoods, only where the time left after the first stage (0.7 s of 1 s) is at
+    least LARGE_LNS_S_PER_CONFLICT per conflict a robot has (wh_25/0: 7.0, so 0.35 s and
+    1.4 s; the floor LARGE_LNS_MIN_S lowered to 0.1 s); else the first stage and tabu search
+    keep the budget, as before."""
     import service.solvers.portfolio as portfolio
 
     sizes: list[int] = []
@@ -161,8 +160,8 @@ def test_above_its_cap_auto_runs_lns_where_robots_meet_few_and_time_allows(
         return lns.lns_search(*args, **kwargs)
 
     monkeypatch.setattr(portfolio, "lns_search", lns_search)
-    monkeypatch.setattr(portfolio, "LARGE_LNS_CONFLICTS_PER_ROBOT", per_robot)
-    monkeypatch.setattr(portfolio, "LARGE_LNS_MIN_S", min_s)
+    monkeypatch.setattr(portfolio, "LARGE_LNS_S_PER_CONFLICT", per_conflict)
+    monkeypatch.setattr(portfolio, "LARGE_LNS_MIN_S", 0.1)
     line = json.loads((DATA / "wh_25.jsonl").read_text().splitlines()[0])
     body = {**line["request"], "options": {"solver": "auto", "time_limit_s": 1.0}}
     policy = DispatchPolicy(exact_max_conflicts=0, exact_stage_max_conflicts=10)
