@@ -132,8 +132,10 @@ class JsonCache:
 # generalization). A reference is the best some solvers found, so it goes stale when
 # they improve: bumped then, so that caches from before are not reused (2: ``auto``'s
 # first stage is robot-priority search, session 12; its 10-s answers on 100-250-robot
-# warehouses cost 15-40 % less than the old references).
-REFERENCE_VERSION = 2
+# warehouses cost 15-40 % less than the old references; 3: session 24, LNS after priority
+# search at 250 robots and its wider step, whose 10-s answers there cost 10-28 % less than
+# the r2 references).
+REFERENCE_VERSION = 3
 
 
 def reference_cache(directory: Path, name: str) -> JsonCache:
