@@ -535,8 +535,8 @@ def lns_search(
                 count = None if busy.all() else sizes.next()
                 if count is None:
                     break
-                robots = fleet.pick(rng, current, count, busy)
-                neighbourhood = _Neighbourhood(ctx, fleet, robots, current)
+                picked = fleet.pick(rng, current, count, busy)
+                neighbourhood = _Neighbourhood(ctx, fleet, picked, current)
                 left = deadline - time.monotonic()
                 if left <= 0:
                     break

@@ -20,11 +20,10 @@ comes first, improving in stages:
    stage: on whole models of this size one CP-SAT worker barely moves from its
    hint. Above ``exact_stage_max_conflicts`` too, from smaller neighbourhoods, where
    the budget leaves it time in proportion to the conflicts per robot (see
-   LARGE_LNS_S_PER_CONFLICT). Below
-   ``lns_min_conflicts``, until it converges (a plateau at its largest
-   neighbourhood), proves optimality (a step that freed every robot of a fleet of at
-   most ``lns.MAX_ROBOTS``, proven by CP-SAT) or MID_LNS_SHARE of the time left has
-   passed, then
+   LARGE_LNS_S_PER_CONFLICT). Below ``lns_min_conflicts``, until it converges (a
+   plateau at its largest neighbourhood), proves optimality (a step that freed every
+   robot of a fleet of at most ``lns.MAX_ROBOTS``, proven by CP-SAT) or MID_LNS_SHARE
+   of the time left has passed, then
 4. **exact**: CP-SAT hinted with the best answer so far, for the rest of the
    budget; it proves optimality where it can (``solver.optimal`` is true only
    then) and never returns worse than its hint (the cheaper is kept, by the one
