@@ -185,3 +185,38 @@ def test_auto_uses_its_budget_when_tabu_stops_early_and_no_cp_sat_follows() -> N
     assert elapsed >= 1.2  # the budget was used (load only makes it slower)
     assert answer.cost >= line["ref_cost"] * (1 - 1e-9)
     assert answer.checks.acyclic and answer.checks.density
+
+
+@pytest.mark.parametrize("stage_cap", [10, None])
+def test_from_lns_min_conflicts_re_insertion_follows_the_first_stage(
+    stage_cap: int | None, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """From lns_min_conflicts conflicts (lowered to 0) re-insertion search runs after the
+    first stage: to the deadline where neither LNS nor CP-SAT follows (above the cap, LNS
+    not paying), else for REINSERT_SHARE of the time left, then LNS; the answer is valid,
+    no better than the proven optimum, and comes within the budget."""
+    import service.solvers.portfolio as portfolio
+
+    untils: list[float] = []
+    original = portfolio.reinsert_search
+
+    def recorded(ctx: Any, start: Any, until: float, seed: int) -> Any:
+        untils.append(until)
+        return original(ctx, start, until, seed)
+
+    monkeypatch.setattr(portfolio, "reinsert_search", recorded)
+    line = json.loads((DATA / "wh_25.jsonl").read_text().splitlines()[0])
+    body = {**line["request"], "options": {"solver": "auto", "time_limit_s": 1.0}}
+    cap = {} if stage_cap is None else {"exact_stage_max_conflicts": stage_cap}
+    policy = DispatchPolicy(exact_max_conflicts=0, lns_min_conflicts=0, **cap)
+    start = time.monotonic()
+    answer = dispatch(ScheduleRequest.model_validate(body), policy)
+    elapsed = time.monotonic() - start
+    assert len(untils) == 1
+    assert elapsed <= 1.1 + 0.15
+    if stage_cap is None:  # LNS follows: re-insertion stops well before the deadline
+        assert untils[0] < start + 0.9
+    else:
+        assert "re-insertion to the deadline" in answer.solver.detail
+    assert answer.cost >= line["ref_cost"] * (1 - 1e-9)
+    assert answer.checks.acyclic and answer.checks.density

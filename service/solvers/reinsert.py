@@ -1,0 +1,520 @@
+"""Re-insertion search: large-neighbourhood search repaired by prioritized planning.
+
+:mod:`service.solvers.lns` re-plans a few robots at a time exactly, with CP-SAT, in
+10-110 ms a step. Here the same neighbourhoods (a seed robot drawn by its delay, then
+robots drawn by the conflicts they share with those picked, a binding wait counting
+more) are repaired the way multi-agent path finding's anytime LNS repairs them, by
+prioritized planning: every other robot's times are held, and the picked robots are
+put back one after the other, in a random order, each on its cheapest passage past the
+robots already placed (:func:`_insert`, a dynamic programme over its events:
+milliseconds for all of them). Several orders are tried per step and the one whose
+picked robots finish earliest is evaluated by the one evaluator and kept when cheaper.
+
+**A passage** of robot r past placed robots with held times: each of r's nodes takes a
+*gap* among the positions (a topological order of the placed robots' node graph) of
+the nodes it conflicts with; a partner node before the gap passes first (r waits at its
+pair enter for the partner's pair exit, or pair enter where following-type is allowed
+and needed), one after it passes second (r must have left, or entered, before the
+partner's held pair enter). Gaps never fall along r's path, so r's nodes slot into the
+order between their partners and every arc still goes forward in it: the answer is
+acyclic by construction, the one cycle that time bounds alone do not exclude (pair
+sections inside merged nodes) included. r's delay rises only where it waits, the least
+such profile is the cheapest for fixed gaps, and the programme keeps, per gap, the
+least delay reachable so far (a smaller delay dominates: waiting longer never helps a
+deadline), so the passage is exact for r alone. Following-type is allowed on a conflict
+only while every binding density clique of it has room left (held and placed conflicts
+counted), and kept only where the exclusive constraint would not hold: the budgets
+always hold.
+
+The held robots keep their times, so a repaired neighbourhood never delays them; their
+least times can only fall when the picked robots leave their way (the exact evaluation
+that decides counts that too). Objectives: the sums, as :mod:`service.solvers.lns`
+(avg_completion, avg_delay); a passage minimises its robot's last delay, which for
+avg_delay is a proxy that the evaluation corrects. Deterministic for a seed.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numba
+import numpy as np
+
+from service.core.assignment import Assignments
+from service.core.csr import csr
+from service.core.evaluate import Evaluation
+from service.solvers.registry import SolveContext
+
+__all__ = ["ReinsertConfig", "ReinsertResult", "reinsert_search"]
+
+TOL = 1e-9  # delays closer than this are equal
+NO_ROOM = -1  # room of a clique whose budget never binds (not counted)
+
+
+@dataclass(frozen=True)
+class ReinsertConfig:
+    """Robots per step, orders tried per step, and how neighbourhoods grow."""
+
+    robots: int = 8  # robots re-inserted per step, at first
+    orders: int = 3  # random orders tried per step, the best evaluated
+    # After steps without improvement that together freed this many times the fleet,
+    # neighbourhoods grow by GROWTH (up to max_robots), as in LNS.
+    stall_cover: float = 1.0
+    growth: float = 1.5
+    max_robots: int = 32
+    blocking_weight: float = 10.0  # a binding wait against 1 per shared conflict
+
+
+class ReinsertResult(NamedTuple):
+    """What a search ended with: the best answer, its cost and the steps taken."""
+
+    best: Assignments
+    cost: float
+    steps: int
+
+
+class _Static(NamedTuple):
+    """The arrays every step reads, built once per search (M conflicts, R robots, V nodes,
+    E events, Q cliques)."""
+
+    rc_start: np.ndarray  # (R+1,) robot r's conflicts are rc_conf[rc_start[r]:rc_start[r+1]]
+    rc_conf: np.ndarray  # (2M,) conflicts grouped by robot
+    rc_side: np.ndarray  # (2M,) the robot's side of each (0: a, 1: b)
+    conf_nodes: np.ndarray  # (M, 2) node of each side
+    conf_robots: np.ndarray  # (M, 2) robot of each side
+    robot_start: np.ndarray  # (R+1,) nodes by robot
+    ev_start: np.ndarray  # (R+1,) events by robot
+    ev_node: np.ndarray  # (E,) the robot's node (0: its first) of each event
+    forced: np.ndarray  # (M,) int8 +1 side a first, -1 side b first, 0 free
+    fixed_type: np.ndarray  # (M,) int8 -1 free, 0 exclusive, 1 following
+    may_follow: np.ndarray  # (M,) bool following-type allowed at all
+    cq_start: np.ndarray  # (M+1,) conflict -> its binding cliques
+    cq_clique: np.ndarray
+    live: np.ndarray  # (2M,) the evaluator's slots (see Evaluator._build_slots)
+    target: np.ndarray  # (2M,)
+    source: np.ndarray  # (2, 2M)
+    offset: np.ndarray  # (2, 2M)
+
+    @classmethod
+    def of(cls, ctx: SolveContext) -> _Static:
+        p, graph = ctx.problem, ctx.evaluator.graph
+        n_conf = p.n_conflicts
+        conf_robots = np.stack([p.node_robot[p.conf_a], p.node_robot[p.conf_b]], axis=1)
+        order = np.argsort(conf_robots.ravel(), kind="stable")  # (2M,)
+        rc_start = np.searchsorted(conf_robots.ravel()[order], np.arange(p.n_robots + 1))
+        event_robot = p.tp_robot[p.events]  # (E,)
+        ev_node = np.zeros(p.events.size, dtype=np.int64)
+        pair_event = graph.target.reshape(n_conf, 2)  # (M, 2) each side's pair-enter event
+        ev_node[pair_event[:, 0]] = p.conf_a
+        ev_node[pair_event[:, 1]] = p.conf_b
+        binding = ctx.cliques.binding()
+        cq_start, cq_clique = ctx.orientation.cq_start, ctx.orientation.cq_clique
+        keep = binding[cq_clique]  # only cliques whose budget can bind are counted
+        conflict_of = np.repeat(np.arange(n_conf), np.diff(cq_start))
+        cq_start, cq_clique = csr(conflict_of[keep], cq_clique[keep], n_conf)
+        return cls(
+            rc_start.astype(np.int64),
+            (order // 2).astype(np.int64),
+            (order % 2).astype(np.int64),
+            np.stack([p.conf_a, p.conf_b], axis=1).astype(np.int64),
+            conf_robots.astype(np.int64),
+            p.robot_start.astype(np.int64),
+            np.searchsorted(event_robot, np.arange(p.n_robots + 1)).astype(np.int64),
+            ev_node - p.robot_start[event_robot],
+            p.forced,
+            p.fixed_type,
+            ctx.orientation.may_follow & (p.fixed_type < 0),
+            cq_start.astype(np.int64),
+            cq_clique.astype(np.int64),
+            graph.live,
+            graph.target,
+            graph.source,
+            graph.offset,
+        )
+
+
+@numba.njit(cache=True, nogil=True)
+def _passage(
+    conflicts: np.ndarray,  # (K,) int, the robot's conflicts with placed partners
+    side: np.ndarray,  # (K,) int, the robot's side of each (0: a, 1: b)
+    node: np.ndarray,  # (K,) int, the robot's node of each (0: its first)
+    partner_pos: np.ndarray,  # (K,) float, each partner node's position
+    force: np.ndarray,  # (K,) int, +1 the robot must pass first, -1 second, 0 free
+    follow: np.ndarray,  # (K,) bool, following-type allowed
+    live: np.ndarray,  # (2M,) bool
+    target: np.ndarray,  # (2M,) int
+    source: np.ndarray,  # (2, 2M) int
+    offset: np.ndarray,  # (2, 2M) float
+    e0: int,  # the robot's first event
+    ev_node: np.ndarray,  # (N,) int, the robot's node of each of its N events
+    n_nodes: int,
+    d: np.ndarray,  # (E+1,) float, the placed robots' delays; the robot's written on exit
+    gap: np.ndarray,  # (n_nodes,) int, out: each node's gap among the sorted partner positions
+    first: np.ndarray,  # (K,) bool, out: the robot passes first
+    following: np.ndarray,  # (K,) bool, out: following-type
+) -> bool:
+    """The robot's passage with the least last delay past its placed partners, whose
+    times ``d`` are held (see the module); False if none exists (fixed directions
+    against held times). Gap g of a node: its partners at the g smallest distinct
+    positions pass first."""
+    k = conflicts.size
+    ranks = np.unique(partner_pos)
+    m = ranks.size
+    kidx = np.searchsorted(ranks, partner_pos)  # (K,) the partner passes first iff kidx < g
+    # Each conflict's release (robot second) and deadline (robot first), at its type.
+    rel_e = np.empty(k, dtype=np.int64)
+    rel_v = np.full(k, -np.inf)
+    dl_e = np.empty(k, dtype=np.int64)
+    dl_v = np.full(k, np.inf)
+    for i in range(k):
+        c, t = conflicts[i], 1 if follow[i] else 0
+        second, first_slot = 2 * c + side[i], 2 * c + 1 - side[i]
+        rel_e[i] = target[second] - e0
+        dl_e[i] = source[t, first_slot] - e0
+        if live[second]:
+            rel_v[i] = d[source[t, second]] + offset[t, second]
+        if live[first_slot]:
+            dl_v[i] = d[target[first_slot]] - offset[t, first_slot]
+    # least[g]: least delay so far with the current node in gap g; back[n, g]: the gap
+    # of node n-1 that least[g] came from on entering node n.
+    least = np.zeros(m + 1)
+    back = np.empty((n_nodes, m + 1), dtype=np.int64)
+    for n in range(n_nodes):
+        back[n] = np.arange(m + 1)  # nodes without events keep the gap
+    by_rel, by_dl = np.argsort(rel_e), np.argsort(dl_e)  # conflicts by event
+    r, t, current = 0, 0, 0
+    for e in range(ev_node.size):
+        while ev_node[e] > current:  # into the next node: its gap is at least the last's
+            current += 1
+            best, arg = np.inf, 0
+            for g in range(m + 1):
+                if least[g] < best - TOL:
+                    best, arg = least[g], g
+                elif least[g] <= best + TOL:
+                    arg = g  # ties: the later gap (the robot yields)
+                least[g] = best
+                back[current, g] = arg
+        while r < k and rel_e[by_rel[r]] == e:
+            i = by_rel[r]
+            r += 1
+            lo = kidx[i] + 1  # gaps lo..m: the partner passes first
+            for g in range(lo, m + 1):
+                least[g] = np.inf if force[i] > 0 else max(least[g], rel_v[i])
+            if force[i] < 0:
+                least[:lo] = np.inf
+        while t < k and dl_e[by_dl[t]] == e:
+            i = by_dl[t]
+            t += 1
+            for g in range(kidx[i] + 1):
+                if least[g] > dl_v[i] + TOL:
+                    least[g] = np.inf
+    best, arg = np.inf, -1
+    for g in range(m + 1):
+        if least[g] < best - TOL:
+            best, arg = least[g], g
+        elif least[g] <= best + TOL and arg >= 0:
+            arg = g
+    if arg < 0:
+        return False
+    gap[n_nodes - 1] = arg
+    for n in range(n_nodes - 1, 0, -1):
+        gap[n - 1] = back[n, gap[n]]
+    # The passage's least delays, one gap per node.
+    delay, r = 0.0, 0
+    for e in range(ev_node.size):
+        while r < k and rel_e[by_rel[r]] == e:
+            i = by_rel[r]
+            r += 1
+            if kidx[i] < gap[ev_node[e]]:
+                delay = max(delay, rel_v[i])
+        d[e0 + e] = delay
+    # Directions; following-type only where the exclusive constraint would not hold.
+    for i in range(k):
+        c = conflicts[i]
+        first[i] = kidx[i] >= gap[node[i]]
+        slot = 2 * c + 1 - side[i] if first[i] else 2 * c + side[i]
+        need = d[source[0, slot]] + offset[0, slot] > d[target[slot]] + TOL
+        following[i] = follow[i] and live[slot] and need
+    return True
+
+
+@numba.njit(cache=True, nogil=True)
+def _repair(
+    order: np.ndarray,  # (k,) int, the picked robots in the order they are put back
+    st: _Static,
+    d: np.ndarray,  # (E+1,) float, the incumbent's delays; the picked robots' rewritten
+    pos: np.ndarray,  # (V,) float, a topological order; the picked robots' nodes moved
+    room: np.ndarray,  # (Q,) int, following-type conflicts each binding clique has left
+    a_first: np.ndarray,  # (M,) bool, rewritten on the picked robots' conflicts
+    following: np.ndarray,  # (M,) bool, likewise
+    weight: np.ndarray,  # (E+1,) float, each event delay's weight in the objective
+) -> float:
+    """Put the picked robots back in ``order``, each on its passage past the robots
+    placed so far (held ones, then those put back before it) -> the picked robots' part
+    of the objective (inf: some robot had no passage). ``room`` must already count the
+    picked robots' conflicts as exclusive."""
+    placed = np.ones(st.rc_start.size - 1, dtype=np.bool_)
+    placed[order] = False
+    cost = 0.0
+    for r in order:
+        lo, hi = st.rc_start[r], st.rc_start[r + 1]
+        k = 0
+        conflicts = np.empty(hi - lo, dtype=np.int64)
+        side = np.empty(hi - lo, dtype=np.int64)
+        for j in range(lo, hi):
+            c, s = st.rc_conf[j], st.rc_side[j]
+            if placed[st.conf_robots[c, 1 - s]]:
+                conflicts[k], side[k] = c, s
+                k += 1
+        conflicts, side = conflicts[:k], side[:k]
+        node = np.empty(k, dtype=np.int64)
+        partner_pos = np.empty(k)
+        force = np.zeros(k, dtype=np.int64)
+        follow = np.zeros(k, dtype=np.bool_)
+        for i in range(k):
+            c, s = conflicts[i], side[i]
+            node[i] = st.conf_nodes[c, s] - st.robot_start[r]
+            partner_pos[i] = pos[st.conf_nodes[c, 1 - s]]
+            if st.forced[c] != 0:
+                force[i] = 1 if (st.forced[c] > 0) == (s == 0) else -1
+            if st.may_follow[c]:  # reserve room in every binding clique of it
+                follow[i] = True
+                for q in st.cq_clique[st.cq_start[c] : st.cq_start[c + 1]]:
+                    follow[i] = follow[i] and room[q] > 0
+                if follow[i]:
+                    for q in st.cq_clique[st.cq_start[c] : st.cq_start[c + 1]]:
+                        room[q] -= 1
+        e0, e1 = st.ev_start[r], st.ev_start[r + 1]
+        n_nodes = st.robot_start[r + 1] - st.robot_start[r]
+        gap = np.empty(n_nodes, dtype=np.int64)
+        first = np.empty(k, dtype=np.bool_)
+        chosen = np.empty(k, dtype=np.bool_)
+        ev_node = st.ev_node[e0:e1]
+        if not _passage(
+            conflicts, side, node, partner_pos, force, follow, st.live, st.target,
+            st.source, st.offset, e0, ev_node, n_nodes, d, gap, first, chosen,
+        ):  # fmt: skip
+            return np.inf
+        for i in range(k):
+            c = conflicts[i]
+            if follow[i] and not chosen[i]:  # give back what it did not need
+                for q in st.cq_clique[st.cq_start[c] : st.cq_start[c + 1]]:
+                    room[q] += 1
+            a_first[c] = first[i] == (side[i] == 0)
+            following[c] = chosen[i] or st.fixed_type[c] == 1
+        _place(pos, st.robot_start[r], gap, np.unique(partner_pos))
+        placed[r] = True
+        for e in range(e0, e1):
+            cost += weight[e] * d[e]
+    return cost
+
+
+@numba.njit(cache=True, nogil=True)
+def _place(pos: np.ndarray, start: int, gap: np.ndarray, ranks: np.ndarray) -> None:
+    """Positions of a robot's nodes (from ``start``) in their gaps among the sorted partner
+    positions ``ranks`` (m,): strictly inside each gap, increasing along the path."""
+    m = ranks.size
+    if m == 0:
+        return  # no placed partner: any increasing positions do, its own stay
+    n = 0
+    while n < gap.size:
+        end = n
+        while end + 1 < gap.size and gap[end + 1] == gap[n]:
+            end += 1
+        g = gap[n]
+        lo = ranks[g - 1] if g > 0 else ranks[0] - 1.0
+        hi = ranks[g] if g < m else ranks[m - 1] + 1.0
+        for j in range(n, end + 1):
+            pos[start + j] = lo + (hi - lo) * (j - n + 1) / (end - n + 2)
+        n = end + 1
+
+
+@numba.njit(cache=True, nogil=True)
+def _pick(
+    st: _Static,
+    count: int,
+    seed_weight: np.ndarray,  # (R,) float, the seed's odds
+    blocking: np.ndarray,  # (M,) bool, conflicts whose wait binds
+    blocking_weight: float,
+    u: np.ndarray,  # (count,) uniform draws
+) -> np.ndarray:
+    """``count`` robots (fewer if the seed's component is smaller): a seed drawn by
+    ``seed_weight``, then each next robot drawn by the conflicts it shares with those
+    picked, one whose wait binds counting ``blocking_weight``."""
+    n_robots = seed_weight.size
+    picked = np.empty(count, dtype=np.int64)
+    picked[0] = np.searchsorted(np.cumsum(seed_weight), u[0] * seed_weight.sum(), side="right")
+    picked[0] = min(picked[0], n_robots - 1)
+    score = np.zeros(n_robots)
+    taken = np.zeros(n_robots, dtype=np.bool_)
+    taken[picked[0]] = True
+    n = 1
+    while n < count:
+        r = picked[n - 1]
+        for j in range(st.rc_start[r], st.rc_start[r + 1]):
+            c, s = st.rc_conf[j], st.rc_side[j]
+            score[st.conf_robots[c, 1 - s]] += blocking_weight if blocking[c] else 1.0
+        score[taken] = 0.0
+        total = score.sum()
+        if total <= 0:
+            break
+        nxt = np.searchsorted(np.cumsum(score), u[n] * total, side="right")
+        picked[n] = min(nxt, n_robots - 1)
+        taken[picked[n]] = True
+        n += 1
+    return picked[:n]
+
+
+@dataclass(frozen=True, eq=False)
+class _Incumbent:
+    """The current answer and what every step reads of it, found once per accepted answer.
+
+    Shapes: M conflicts, E events, V nodes, Q cliques, R robots.
+    """
+
+    a_first: np.ndarray  # (M,) bool
+    following: np.ndarray  # (M,) bool
+    cost: float
+    delay: np.ndarray  # (E+1,) least delays
+    pos: np.ndarray  # (V,) float, a topological order of the node graph
+    counts: np.ndarray  # (Q,) following-type conflicts per clique
+    robot_delay: np.ndarray  # (R,) each robot's delay at completion
+    blocking: np.ndarray  # (M,) bool, conflicts whose wait binds
+
+    @classmethod
+    def of(
+        cls, ctx: SolveContext, answer: Assignments, evaluation: Evaluation, pos: np.ndarray
+    ) -> _Incumbent:
+        """``answer`` with its evaluation and a topological order ``pos`` (V,) of its node
+        graph (re-ranked to 0..V-1: repairs split gaps, which would shrink without end)."""
+        return cls(
+            answer.a_first[0],
+            answer.following[0],
+            float(evaluation.costs[ctx.objective][0]),
+            evaluation.event_delay[0],
+            np.argsort(np.argsort(pos, kind="stable")).astype(np.float64),
+            ctx.cliques.following_counts(answer.following)[0],
+            evaluation.completion[0] - ctx.problem.free_time(),
+            ctx.evaluator.binding(answer, evaluation),
+        )
+
+
+def _objective_weight(ctx: SolveContext) -> np.ndarray:
+    """(E+1,) weight of each event's delay in a robot's part of the objective: its last
+    event's for avg_completion (completion = free time + that delay), the evaluator's
+    for avg_delay."""
+    graph = ctx.evaluator.graph
+    if ctx.objective == "avg_delay":
+        return graph.delay_weight.copy()
+    weight = np.zeros(graph.delay_weight.size)
+    weight[graph.last_event] = 1.0
+    weight[-1] = 0.0  # robots with no event
+    return weight
+
+
+def reinsert_search(
+    ctx: SolveContext,
+    start: Assignments,
+    deadline: float,
+    seed: int,
+    config: ReinsertConfig = ReinsertConfig(),
+    max_steps: int | None = None,
+) -> ReinsertResult:
+    """Re-insertion LNS from the valid ``start`` until ``deadline`` (monotonic) or
+    ``max_steps`` steps (None: no cap), whichever comes first."""
+    st = _Static.of(ctx)
+    weight = _objective_weight(ctx)
+    budget = ctx.cliques.budget.astype(np.int64)
+    rng = np.random.default_rng(seed)
+    rank = ctx.orientation.topological_rank(start.a_first[0])
+    if rank is None:
+        raise ValueError("the answer to search from closes a cycle")
+    current = _Incumbent.of(ctx, start, ctx.evaluator.evaluate(start), rank)
+    best = start
+    n_robots, steps = ctx.problem.n_robots, 0
+    count, stalled = min(config.robots, n_robots), 0
+    while time.monotonic() < deadline and (max_steps is None or steps < max_steps):
+        if stalled * count >= config.stall_cover * n_robots:
+            count, stalled = min(int(count * config.growth) + 1, config.max_robots, n_robots), 0
+        picked = _pick(
+            st, count, np.maximum(current.robot_delay, 0.0) + 1e-9, current.blocking,
+            config.blocking_weight, rng.random(count),
+        )  # fmt: skip
+        found = _best_repair(ctx, st, current, picked, budget, weight, rng, config.orders)
+        steps += 1
+        better = None if found is None else _cheaper(ctx, current, *found)
+        if better is None:
+            stalled += 1
+            continue
+        best, current, stalled = found[0], better, 0
+    return ReinsertResult(best, current.cost, steps)
+
+
+def _best_repair(
+    ctx: SolveContext,
+    st: _Static,
+    current: _Incumbent,
+    picked: np.ndarray,
+    budget: np.ndarray,
+    weight: np.ndarray,
+    rng: np.random.Generator,
+    orders: int,
+) -> tuple[Assignments, np.ndarray] | None:
+    """The picked robots put back in ``orders`` random orders: the repair whose picked
+    robots' part of the objective is least, with its node positions (V,) (None: no order
+    found passages for all)."""
+    freed = _freed(st, picked, ctx.problem.n_conflicts)  # (M,) bool
+    room = budget - current.counts
+    _give_back(st, np.flatnonzero(current.following & freed), room)
+    base_following = current.following & ~freed
+    found, found_cost = None, np.inf
+    for _ in range(orders):
+        a_first, following, pos = current.a_first.copy(), base_following.copy(), current.pos.copy()
+        cost = _repair(
+            rng.permutation(picked), st, current.delay.copy(), pos, room.copy(), a_first,
+            following, weight,
+        )  # fmt: skip
+        if cost < found_cost:
+            found, found_cost = (Assignments.single(a_first, following), pos), cost
+    return found
+
+
+@numba.njit(cache=True, nogil=True)
+def _freed(st: _Static, picked: np.ndarray, n_conflicts: int) -> np.ndarray:
+    """(M,) bool: the conflicts of the picked robots."""
+    freed = np.zeros(n_conflicts, dtype=np.bool_)
+    for r in picked:
+        freed[st.rc_conf[st.rc_start[r] : st.rc_start[r + 1]]] = True
+    return freed
+
+
+@numba.njit(cache=True, nogil=True)
+def _give_back(st: _Static, conflicts: np.ndarray, room: np.ndarray) -> None:
+    """``room`` (Q,) with the following-type ``conflicts`` made exclusive."""
+    for c in conflicts:
+        for q in st.cq_clique[st.cq_start[c] : st.cq_start[c + 1]]:
+            room[q] += 1
+
+
+def _cheaper(
+    ctx: SolveContext, current: _Incumbent, found: Assignments, pos: np.ndarray
+) -> _Incumbent | None:
+    """``found`` (node positions ``pos`` (V,)) as the new incumbent if the evaluator finds
+    it cheaper; None otherwise, and (a guard: repairs exclude both by construction) if
+    ``pos`` is not a topological order of its node graph or a density clique holds more
+    following-type conflicts than its budget."""
+    evaluation = ctx.evaluator.evaluate(found)
+    if not float(evaluation.costs[ctx.objective][0]) < current.cost:
+        return None
+    p, a_first = ctx.problem, found.a_first[0]
+    tail = np.where(a_first, p.conf_a, p.conf_b)  # (M,) the node passing first
+    head = np.where(a_first, p.conf_b, p.conf_a)
+    along = p.node_robot[1:] == p.node_robot[:-1]  # (V-1,) path arcs v -> v+1
+    if (pos[tail] >= pos[head]).any() or (pos[1:][along] <= pos[:-1][along]).any():
+        return None
+    incumbent = _Incumbent.of(ctx, found, evaluation, pos)
+    if (incumbent.counts > ctx.cliques.budget).any():
+        return None
+    return incumbent

@@ -1,0 +1,173 @@
+"""Re-insertion search: every repair is valid and its times are a schedule of its answer,
+a lone robot's passage is never worse than the one it had, and the search only improves
+(hypothesis over tiny, small, stitched and conformance problems)."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from service.core.assignment import Assignments
+from service.core.check import check
+from service.core.problem import problem_from_request
+from service.core.schemas import ScheduleRequest
+from service.learning.generate import small_problem, stitched_problem
+from service.solvers import reinsert
+from service.solvers.registry import SolveContext
+from service.solvers.tabu import plain_start
+from tests.reference import fix_directions, tiny_request
+
+DATA = Path(__file__).resolve().parents[1] / "data" / "conformance"
+OBJECTIVES = ("avg_completion", "avg_delay")
+
+
+def _request(family: str, seed: int, robots: int) -> dict:
+    if family == "tiny":
+        return tiny_request(seed)
+    if family == "fixed":  # some directions fixed in advance
+        return fix_directions(tiny_request(seed), seed)
+    if family == "small":
+        return small_problem(seed)
+    if family == "stitched":
+        return stitched_problem(seed, robots, 3.0)
+    name = ["wh_25", "wh_50", "geo_dense_25"][seed % 3]
+    line = (DATA / f"{name}.jsonl").read_text().splitlines()[seed % 4]
+    return json.loads(line)["request"]
+
+
+def _context(request: dict, objective: str) -> SolveContext:
+    validated = ScheduleRequest.model_validate({**request, "objective": objective})
+    return SolveContext(problem_from_request(validated), objective, 1.0)
+
+
+FAMILIES = st.sampled_from(["tiny", "fixed", "small", "stitched", "conformance"])
+SLOW = [HealthCheck.too_slow]
+
+
+def _incumbent(ctx: SolveContext) -> reinsert._Incumbent:
+    start = plain_start(ctx)
+    rank = ctx.orientation.topological_rank(start.a_first[0])
+    assert rank is not None
+    return reinsert._Incumbent.of(ctx, start, ctx.evaluator.evaluate(start), rank)
+
+
+@settings(max_examples=60, deadline=None, derandomize=True, suppress_health_check=SLOW)
+@given(
+    family=FAMILIES,
+    seed=st.integers(0, 10_000),
+    robots=st.integers(3, 30),
+    picked=st.integers(1, 8),
+    objective=st.sampled_from(OBJECTIVES),
+)
+def test_every_repair_is_valid_and_its_times_are_a_schedule_of_it(
+    family: str, seed: int, robots: int, picked: int, objective: str
+) -> None:
+    """Whatever robots are put back, in whatever order: the answer passes the checker
+    (acyclic, within every density budget, fixed directions honoured), its positions are a
+    topological order of its node graph, and the times the repair held and planned satisfy
+    every constraint of it, so its least delays are no larger, event by event."""
+    ctx = _context(_request(family, seed, robots), objective)
+    problem = ctx.problem
+    if problem.n_conflicts == 0:
+        return
+    static = reinsert._Static.of(ctx)
+    current = _incumbent(ctx)
+    rng = np.random.default_rng(seed)
+    order = rng.permutation(problem.n_robots)[: min(picked, problem.n_robots)]
+    freed = reinsert._freed(static, order, problem.n_conflicts)
+    room = ctx.cliques.budget.astype(np.int64) - current.counts
+    reinsert._give_back(static, np.flatnonzero(current.following & freed), room)
+    a_first, following = current.a_first.copy(), current.following & ~freed
+    delay, pos = current.delay.copy(), current.pos.copy()
+    weight = reinsert._objective_weight(ctx)
+    cost = reinsert._repair(order, static, delay, pos, room, a_first, following, weight)
+    if not np.isfinite(cost):  # only where fixed directions leave a robot no passage
+        assert problem.has_forced
+        return
+    found = Assignments.single(a_first, following)
+    checks = check(problem, ctx.cliques, found)
+    assert checks.acyclic[0] and checks.density[0] and checks.forced[0]
+    tail = np.where(a_first, problem.conf_a, problem.conf_b)
+    head = np.where(a_first, problem.conf_b, problem.conf_a)
+    assert (pos[tail] < pos[head]).all()
+    least = ctx.evaluator.evaluate(found).event_delay[0]
+    assert (least <= delay + 1e-6).all()
+    mine = _events_of(ctx, order)
+    assert cost == pytest.approx(float(weight[mine] @ delay[mine]))
+
+
+def _events_of(ctx: SolveContext, robots: np.ndarray) -> np.ndarray:
+    """(E+1,) bool: the events of ``robots``."""
+    problem = ctx.problem
+    mine = np.zeros(problem.events.size + 1, dtype=bool)
+    mine[:-1] = np.isin(problem.tp_robot[problem.events], robots)
+    return mine
+
+
+@settings(max_examples=60, deadline=None, derandomize=True, suppress_health_check=SLOW)
+@given(family=FAMILIES, seed=st.integers(0, 10_000), robots=st.integers(3, 30))
+def test_a_lone_robot_never_finishes_later_than_it_did(family: str, seed: int, robots: int) -> None:
+    """Put back alone, with every other robot held, a robot's passage is exact for it: its
+    last delay is at most the one it had (whose passage is among those searched), where
+    no density budget binds (a bound budget's room is shared out greedily)."""
+    ctx = _context(_request(family, seed, robots), "avg_completion")
+    problem = ctx.problem
+    if problem.n_conflicts == 0 or ctx.cliques.binding().any():
+        return
+    static = reinsert._Static.of(ctx)
+    current = _incumbent(ctx)
+    weight = reinsert._objective_weight(ctx)
+    for robot in range(problem.n_robots):
+        order = np.array([robot])
+        freed = reinsert._freed(static, order, problem.n_conflicts)
+        room = ctx.cliques.budget.astype(np.int64) - current.counts
+        a_first, following = current.a_first.copy(), current.following & ~freed
+        delay = current.delay.copy()
+        cost = reinsert._repair(
+            order, static, delay, current.pos.copy(), room, a_first, following, weight
+        )
+        had = float(weight[_events_of(ctx, order)] @ current.delay[_events_of(ctx, order)])
+        assert cost <= had + 1e-9
+
+
+@settings(max_examples=20, deadline=None, derandomize=True, suppress_health_check=SLOW)
+@given(
+    family=FAMILIES,
+    seed=st.integers(0, 10_000),
+    robots=st.integers(3, 30),
+    objective=st.sampled_from(OBJECTIVES),
+)
+def test_the_search_only_improves_and_is_deterministic(
+    family: str, seed: int, robots: int, objective: str
+) -> None:
+    ctx = _context(_request(family, seed, robots), objective)
+    if ctx.problem.n_conflicts == 0:
+        return
+    start = plain_start(ctx)
+    config = reinsert.ReinsertConfig(robots=3)
+    runs = []
+    for _ in range(2):
+        runs.append(reinsert.reinsert_search(ctx, start, np.inf, seed, config, max_steps=30))
+    first, again = runs
+    start_cost = float(ctx.evaluator.evaluate(start).costs[objective][0])
+    assert first.cost <= start_cost
+    assert first.steps == again.steps == 30
+    assert first.cost == again.cost
+    assert np.array_equal(first.best.a_first, again.best.a_first)
+    checks = check(ctx.problem, ctx.cliques, first.best)
+    assert checks.acyclic[0] and checks.density[0] and checks.forced[0]
+    assert first.cost == float(ctx.evaluator.evaluate(first.best).costs[objective][0])
+
+
+def test_the_search_stops_at_its_deadline() -> None:
+    line = (DATA / "wh_50.jsonl").read_text().splitlines()[0]
+    ctx = _context(json.loads(line)["request"], "avg_completion")
+    begin = time.monotonic()
+    reinsert.reinsert_search(ctx, plain_start(ctx), begin + 0.2, 0)
+    assert time.monotonic() - begin < 0.2 + 0.1
