@@ -369,10 +369,9 @@ def _pick(
 
 @dataclass(frozen=True, eq=False)
 class _Incumbent:
-    """The current answer and what every step reads of it, found once per accepted answer.
-
-    Shapes: M conflicts, E events, V nodes, Q cliques, R robots.
-    """
+    """A re-insertion search's current answer with its evaluation, positions and clique
+    counts, found once per accepted answer (M conflicts, E events, V nodes, Q cliques,
+    R robots)."""
 
     a_first: np.ndarray  # (M,) bool
     following: np.ndarray  # (M,) bool
