@@ -12,7 +12,8 @@ comes first, improving in stages:
    stalls, then tabu search; measured better than tabu search alone, which was
    measured better than the GNN-VAE refined by tabu search, ``gnn_vae_refined``), or
    tabu search from the previous answer in a re-schedule, with FIRST_STAGE_SHARE of
-   the budget; from ``lns_min_conflicts`` conflicts (avg_completion) followed by
+   the budget; from ``lns_min_conflicts`` conflicts (avg_completion, avg_delay; the first
+   stage then with REINSERT_FIRST_SHARE) followed by
    re-insertion search (:mod:`service.solvers.reinsert`: neighbourhoods repaired by
    prioritized planning, ~1-4 ms a step), with REINSERT_SHARE of the time left, or to
    the deadline where no later stage runs;
@@ -124,9 +125,19 @@ MID_LNS_SHARE = 0.5
 # (0.935 -> 0.929 / 0.869 -> 0.882); 250-robot two-lane at 1 s priority alone 0.552,
 # then re-insertion 0.673, at 5 s priority then LNS 0.658, priority then re-insertion
 # 0.780, then 30 % re-insertion and LNS 0.825; two-way 250 even (1 s 0.671 -> 0.676, 5 s
-# 0.788 -> 0.793). Only avg_completion was measured.
+# 0.788 -> 0.793). Through the dispatcher with the first stage at REINSERT_FIRST_SHARE,
+# 0.3 / 0.43 / 0.6 of the time left: 1 s 0.7262 / 0.7310 / 0.7307, 5 s 0.8625 / 0.8674 /
+# 0.8697 (flat). avg_delay (the same 12 warehouses, one seed, paired costs without / with
+# re-insertion): 1.21x at 1 s, 1.15x at 5 s (better on 8 of 12 at each, two-lane 1.1-1.4x,
+# two-way 250 0.97x at 1 s).
 REINSERT_SHARE = 0.43
-REINSERT_OBJECTIVES = ("avg_completion",)
+# The first stage's share of the budget where re-insertion follows it (FIRST_STAGE_SHARE
+# elsewhere). Measured (session 25, the same 12 warehouses through the dispatcher, two
+# seeds, mean cost ratio at 1 s / 5 s): 0.3 0.7342 / 0.8449 and 0.7264 / 0.8386, 0.15
+# 0.7310 / 0.8674 and 0.7368 / 0.8601 (5 s better on every family of the first seed),
+# 0.05 0.7200 / 0.8652 and 0.7358 / 0.8615.
+REINSERT_FIRST_SHARE = 0.15
+REINSERT_OBJECTIVES = ("avg_completion", "avg_delay")
 
 
 @register("auto")
@@ -190,7 +201,8 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
         left = deadline - time.monotonic()
         # Whether a stage follows.
         shared = uses_lns or reinserts or (1 - FIRST_STAGE_SHARE) * left > exact_min_s
-        found = get_solver(first)(_with_time(ctx, FIRST_STAGE_SHARE * left if shared else left))
+        share = REINSERT_FIRST_SHARE if reinserts else FIRST_STAGE_SHARE
+        found = get_solver(first)(_with_time(ctx, share * left if shared else left))
         found_cost = np.inf if found is None else _cost(ctx, found.assignment)
         if found is not None and found_cost <= cost:
             best, cost = found, found_cost
