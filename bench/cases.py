@@ -224,21 +224,26 @@ def solve_case(
 
 
 def service_policy(store: Path) -> DispatchPolicy:
-    """The service's dispatch policy with the models of ``store`` loaded, and torch's threads
-    set as the service sets them (cores / SCHEDULER_SOLVE_CONCURRENCY: 1 on 2 cores).
+    """The service's dispatch policy with the models of ``store`` loaded, torch's threads
+    set as the service sets them (cores / SCHEDULER_SOLVE_CONCURRENCY: 1 on 2 cores), and
+    warmed up as the service is before it reports ready (every search's compiled kernels
+    loaded: re-insertion search's take ~15 s to compile on a cold cache, which the first
+    timed request would otherwise pay).
 
     Torch's own default (every core) next to another busy process made GNN-VAE sampling
     overrun 0.1 s budgets by 1-1.7 s on the 2-core benchmark machine; with one thread, 0.
 
     Raises:
-        SystemExit: a model failed to load.
+        SystemExit: a model failed to load, or the warm-up failed.
     """
-    from service.api.runtime import build_runtime, load_models
+    from service.api.runtime import build_runtime, warm_up
 
     runtime = build_runtime(Settings(model_store=store))
-    load_models(runtime, store)
+    warm_up(runtime)  # loads the models of runtime.model_store first
     if runtime.model_errors:
         raise SystemExit(f"models failed to load: {runtime.model_errors}")
+    if not runtime.ready:
+        raise SystemExit(f"warm-up failed: {runtime.detail}")
     return runtime.policy
 
 

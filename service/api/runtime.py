@@ -232,10 +232,10 @@ def warm_up(runtime: Runtime) -> None:
     try:
         dispatch(WARMUP_REQUEST, runtime.policy)
         # The large-problem paths too (tabu's kernels, the GNN-VAE), or their fallbacks, and
-        # last large-neighbourhood search (it runs to its limit: steps of milliseconds here,
-        # the first one compiling its kernels once the others' start is compiled).
+        # last large-neighbourhood search and re-insertion search (they run to their limits:
+        # steps of milliseconds here, the first one compiling their kernels).
         warmed = dict.fromkeys([runtime.policy.large_solver, "gnn_vae_refined"], 10.0)
-        for solver, limit_s in {**warmed, "lns": 0.5}.items():
+        for solver, limit_s in {**warmed, "lns": 0.5, "reinsert": 0.2}.items():
             large = OptionsIn(solver=solver, samples=2, time_limit_s=limit_s)
             dispatch(WARMUP_REQUEST.model_copy(update={"options": large}), runtime.policy)
         # The paths form: geometry, dependency plan, executor and clearance kernels.

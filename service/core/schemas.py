@@ -69,6 +69,7 @@ SolverName = Literal[
     "tabu",
     "priority_tabu",
     "lns",
+    "reinsert",
     "cmaes",
     "bbts",
 ]

@@ -50,6 +50,7 @@ from service.solvers import (  # noqa: F401  (registers the solvers)
     priority,
     random_search,
     refine,
+    reinsert,
     tabu,
 )
 from service.solvers.registry import SolveContext, SolverOutput, get_solver

@@ -65,7 +65,7 @@ from service.core.decompose import DECOMPOSABLE, Part, join, parts
 from service.solvers.exact import build_seconds, improve
 from service.solvers.lns import LNS_OBJECTIVES, LNS_ROBOTS, lns_search
 from service.solvers.registry import SolveContext, SolverOutput, get_solver, register
-from service.solvers.reinsert import reinsert_search
+from service.solvers.reinsert import REINSERT_OBJECTIVES, reinsert_search
 from service.solvers.tabu import plain_start, tabu_search
 
 __all__ = ["FIRST_STAGE_SHARE", "auto"]
@@ -137,7 +137,6 @@ REINSERT_SHARE = 0.43
 # 0.7310 / 0.8674 and 0.7368 / 0.8601 (5 s better on every family of the first seed),
 # 0.05 0.7200 / 0.8652 and 0.7358 / 0.8615.
 REINSERT_FIRST_SHARE = 0.15
-REINSERT_OBJECTIVES = ("avg_completion", "avg_delay")
 
 
 @register("auto")

@@ -45,10 +45,14 @@ import numpy as np
 from service.core.assignment import Assignments
 from service.core.csr import csr
 from service.core.evaluate import Evaluation
-from service.solvers.registry import SolveContext
+from service.solvers.registry import SolveContext, SolverOutput, register
+from service.solvers.tabu import plain_start
 
-__all__ = ["ReinsertConfig", "ReinsertResult", "reinsert_search"]
+__all__ = ["REINSERT_OBJECTIVES", "ReinsertConfig", "ReinsertResult", "reinsert_search"]
 
+# Objectives a repair's part of the cost stands for (sums over robots; measured for both,
+# see ``portfolio.REINSERT_SHARE``).
+REINSERT_OBJECTIVES = ("avg_completion", "avg_delay")
 TOL = 1e-9  # delays closer than this are equal
 NO_ROOM = -1  # room of a clique whose budget never binds (not counted)
 
@@ -468,16 +472,56 @@ def _best_repair(
     room = budget - current.counts
     _give_back(st, np.flatnonzero(current.following & freed), room)
     base_following = current.following & ~freed
+    tails, heads = _fixed_between(st, picked, freed)
     found, found_cost = None, np.inf
     for _ in range(orders):
+        order = _fixed_first(rng.permutation(picked), tails, heads)
         a_first, following, pos = current.a_first.copy(), base_following.copy(), current.pos.copy()
         cost = _repair(
-            rng.permutation(picked), st, current.delay.copy(), pos, room.copy(), a_first,
-            following, weight,
-        )  # fmt: skip
+            order, st, current.delay.copy(), pos, room.copy(), a_first, following, weight
+        )
         if cost < found_cost:
             found, found_cost = (Assignments.single(a_first, following), pos), cost
     return found
+
+
+def _fixed_between(
+    st: _Static, picked: np.ndarray, freed: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The fixed directions between two picked robots, as robot arcs (first (F,), second
+    (F,))."""
+    conflicts = np.flatnonzero(freed & (st.forced != 0))
+    robots = st.conf_robots[conflicts]  # (F, 2)
+    both = np.isin(robots, picked).all(axis=1)
+    robots, a_first = robots[both], st.forced[conflicts[both]] > 0
+    return np.where(a_first, robots[:, 0], robots[:, 1]), np.where(
+        a_first, robots[:, 1], robots[:, 0]
+    )
+
+
+def _fixed_first(order: np.ndarray, tails: np.ndarray, heads: np.ndarray) -> np.ndarray:
+    """``order`` (k,) changed as little as it takes for a robot that must pass another
+    picked robot first (arcs ``tails`` -> ``heads``) to be put back before it: a robot put
+    back earlier passes with that robot absent and may take the time the other needed.
+    Kahn's order, taking the earliest ready robot of ``order``; robots on a cycle of
+    fixed directions (possible between robots, never between nodes) keep their places
+    after the rest."""
+    if tails.size == 0:
+        return order
+    waiting = {int(r): int(np.count_nonzero(heads == r)) for r in order}
+    out: list[int] = []
+    while len(out) < order.size:
+        ready = [int(r) for r in order if waiting.get(int(r), -1) == 0]
+        if not ready:
+            out += [int(r) for r in order if int(r) in waiting]
+            break
+        robot = ready[0]
+        del waiting[robot]
+        out.append(robot)
+        for head in heads[tails == robot]:
+            if int(head) in waiting:
+                waiting[int(head)] -= 1
+    return np.array(out, dtype=np.int64)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -517,3 +561,15 @@ def _cheaper(
     if (incumbent.counts > ctx.cliques.budget).any():
         return None
     return incumbent
+
+
+@register("reinsert")
+def reinsert(ctx: SolveContext) -> SolverOutput:
+    """Re-insertion search from the instant answer (FCFS or its cheapest blend) within the
+    time limit; for the objectives it does not search, that answer."""
+    deadline = time.monotonic() + ctx.time_limit_s
+    start = plain_start(ctx)
+    if ctx.objective not in REINSERT_OBJECTIVES:
+        return SolverOutput(start, detail=f"no re-insertion for {ctx.objective}")
+    found = reinsert_search(ctx, start, deadline, ctx.seed)
+    return SolverOutput(found.best, detail=f"{found.steps} re-insertion steps")

@@ -171,3 +171,43 @@ def test_the_search_stops_at_its_deadline() -> None:
     begin = time.monotonic()
     reinsert.reinsert_search(ctx, plain_start(ctx), begin + 0.2, 0)
     assert time.monotonic() - begin < 0.2 + 0.1
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(
+    k=st.integers(1, 8),
+    arcs=st.lists(st.tuples(st.integers(0, 7), st.integers(0, 7)), max_size=12),
+    seed=st.integers(0, 1000),
+)
+def test_robots_fixed_to_pass_first_are_put_back_first(
+    k: int, arcs: list[tuple[int, int]], seed: int
+) -> None:
+    """The order keeps every picked robot once, and where the fixed directions among them
+    form no cycle, each robot comes before every robot it must pass first."""
+    robots = np.random.default_rng(seed).permutation(20)[:k]
+    pairs = [(robots[t % k], robots[h % k]) for t, h in arcs if t % k != h % k]
+    tails = np.array([t for t, _ in pairs], dtype=np.int64)
+    heads = np.array([h for _, h in pairs], dtype=np.int64)
+    order = reinsert._fixed_first(robots, tails, heads)
+    assert sorted(order.tolist()) == sorted(robots.tolist())
+    place = {int(r): i for i, r in enumerate(order)}
+    graph = {int(r): [int(h) for h in heads[tails == r]] for r in robots}
+    if _acyclic(graph):
+        assert all(place[int(t)] < place[int(h)] for t, h in pairs)
+
+
+def _acyclic(graph: dict[int, list[int]]) -> bool:
+    indegree = {v: 0 for v in graph}
+    for heads in graph.values():
+        for h in heads:
+            indegree[h] += 1
+    ready = [v for v, d in indegree.items() if d == 0]
+    seen = 0
+    while ready:
+        v = ready.pop()
+        seen += 1
+        for h in graph[v]:
+            indegree[h] -= 1
+            if indegree[h] == 0:
+                ready.append(h)
+    return seen == len(graph)
