@@ -5,8 +5,9 @@
 robots drawn by the conflicts they share with those picked, a binding wait counting
 more) are repaired the way multi-agent path finding's anytime LNS repairs them, by
 prioritized planning: every other robot's times are held, and the picked robots are
-put back one after the other, in a random order, each on its cheapest passage past the
-robots already placed (:func:`_insert`, a dynamic programme over its events:
+put back one after the other, in a random order (except that a robot that must pass
+another picked robot first comes before it), each on its cheapest passage past the
+robots already placed (:func:`_passage`, a dynamic programme over its events:
 milliseconds for all of them). Several orders are tried per step and the one whose
 picked robots finish earliest is evaluated by the one evaluator and kept when cheaper.
 
@@ -54,7 +55,6 @@ __all__ = ["REINSERT_OBJECTIVES", "ReinsertConfig", "ReinsertResult", "reinsert_
 # see ``portfolio.REINSERT_SHARE``).
 REINSERT_OBJECTIVES = ("avg_completion", "avg_delay")
 TOL = 1e-9  # delays closer than this are equal
-NO_ROOM = -1  # room of a clique whose budget never binds (not counted)
 
 
 @dataclass(frozen=True)
@@ -63,8 +63,8 @@ class ReinsertConfig:
 
     robots: int = 8  # robots re-inserted per step, at first
     orders: int = 3  # random orders tried per step, the best evaluated
-    # After steps without improvement that together freed this many times the fleet,
-    # neighbourhoods grow by GROWTH (up to max_robots), as in LNS.
+    # After steps without improvement that together freed stall_cover times the fleet,
+    # neighbourhoods grow by ``growth`` (up to max_robots), as in LNS.
     stall_cover: float = 1.0
     growth: float = 1.5
     max_robots: int = 32
@@ -426,7 +426,7 @@ def reinsert_search(
     max_steps: int | None = None,
 ) -> ReinsertResult:
     """Re-insertion LNS from the valid ``start`` until ``deadline`` (monotonic) or
-    ``max_steps`` steps (None: no cap), whichever comes first."""
+    ``max_steps`` steps (None: no cap), whichever comes first, or until no robot waits."""
     st = _Static.of(ctx)
     weight = _objective_weight(ctx)
     budget = ctx.cliques.budget.astype(np.int64)
@@ -439,6 +439,8 @@ def reinsert_search(
     n_robots, steps = ctx.problem.n_robots, 0
     count, stalled = min(config.robots, n_robots), 0
     while time.monotonic() < deadline and (max_steps is None or steps < max_steps):
+        if not (current.robot_delay > TOL).any():
+            break  # nobody waits (delays never fall along a path): the free cost, optimal
         if stalled * count >= config.stall_cover * n_robots:
             count, stalled = min(int(count * config.growth) + 1, config.max_robots, n_robots), 0
         picked = _pick(

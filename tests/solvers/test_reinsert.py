@@ -157,7 +157,7 @@ def test_the_search_only_improves_and_is_deterministic(
     first, again = runs
     start_cost = float(ctx.evaluator.evaluate(start).costs[objective][0])
     assert first.cost <= start_cost
-    assert first.steps == again.steps == 30
+    assert first.steps == again.steps <= 30  # fewer only where nobody waits any more
     assert first.cost == again.cost
     assert np.array_equal(first.best.a_first, again.best.a_first)
     checks = check(ctx.problem, ctx.cliques, first.best)
@@ -211,3 +211,17 @@ def _acyclic(graph: dict[int, list[int]]) -> bool:
             if indegree[h] == 0:
                 ready.append(h)
     return seen == len(graph)
+
+
+def test_the_search_stops_where_nobody_waits() -> None:
+    """Two robots that meet but never wait (the free cost): no step is taken."""
+    request = {
+        "robots": [
+            {"id": "a", "nodes": [{"id": "a0", "enter": 0.0, "exit": 1.0}]},
+            {"id": "b", "nodes": [{"id": "b0", "enter": 5.0, "exit": 6.0}]},
+        ],
+        "conflicts": [{"a": "a0", "b": "b0"}],
+    }
+    ctx = _context(request, "avg_completion")
+    found = reinsert.reinsert_search(ctx, plain_start(ctx), time.monotonic() + 5.0, 0)
+    assert found.steps == 0
