@@ -471,6 +471,7 @@ def _best_repair(
     robots' part of the objective is least, with its node positions (V,) (None: no order
     found passages for all)."""
     freed = _freed(st, picked, ctx.problem.n_conflicts)  # (M,) bool
+    freed &= st.fixed_type < 0  # a realized conflict's type stays, and its room taken
     room = budget - current.counts
     _give_back(st, np.flatnonzero(current.following & freed), room)
     base_following = current.following & ~freed

@@ -21,7 +21,7 @@ from service.solvers.dispatch import DispatchPolicy, dispatch, render_reserve
 from service.solvers.rescheduling import Rescheduler
 
 POLICY = DispatchPolicy()
-SOLVERS = ("auto", "tabu", "priority_tabu", "fcfs", "random", "bbts", "cmaes")
+SOLVERS = ("auto", "tabu", "priority_tabu", "reinsert", "fcfs", "random", "bbts", "cmaes")
 
 
 def _progress(problem: Problem, previous: Assignments, rng: np.random.Generator) -> dict[str, Any]:
