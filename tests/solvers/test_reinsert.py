@@ -195,3 +195,17 @@ def test_robots_fixed_to_pass_first_are_put_back_first(
     graph = nx.DiGraph(list(zip(tails.tolist(), heads.tolist(), strict=True)))
     if nx.is_directed_acyclic_graph(graph):
         assert all(place[int(t)] < place[int(h)] for t, h in pairs)
+
+
+def test_the_search_stops_where_nobody_waits() -> None:
+    """Two robots that meet but never wait (the free cost): no step is taken."""
+    request = {
+        "robots": [
+            {"id": "a", "nodes": [{"id": "a0", "enter": 0.0, "exit": 1.0}]},
+            {"id": "b", "nodes": [{"id": "b0", "enter": 5.0, "exit": 6.0}]},
+        ],
+        "conflicts": [{"a": "a0", "b": "b0"}],
+    }
+    ctx = _context(request, "avg_completion")
+    found = reinsert.reinsert_search(ctx, plain_start(ctx), time.monotonic() + 5.0, 0)
+    assert found.steps == 0
