@@ -192,8 +192,10 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
         np.inf if too_large or lns_only else build_seconds(problem, ctx.cliques, ctx.objective)
     )
     exact_min_s *= EXACT_TIME_PER_BUILD
-    reinserts = (
-        ctx.objective in REINSERT_OBJECTIVES and problem.n_conflicts >= ctx.lns_min_conflicts
+    reinserts = (  # LNS_OBJECTIVES hold REINSERT_OBJECTIVES: uses_lns or too_large then
+        ctx.objective in REINSERT_OBJECTIVES
+        and problem.n_conflicts > ctx.exact_max_conflicts
+        and problem.n_conflicts >= ctx.lns_min_conflicts
     )
     if problem.n_conflicts > ctx.exact_max_conflicts:
         first = "tabu" if ctx.warm is not None else ctx.first_stage

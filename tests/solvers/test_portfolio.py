@@ -220,3 +220,15 @@ def test_from_lns_min_conflicts_re_insertion_follows_the_first_stage(
         assert "re-insertion to the deadline" in answer.solver.detail
     assert answer.cost >= line["ref_cost"] * (1 - 1e-9)
     assert answer.checks.acyclic and answer.checks.density
+
+
+def test_small_problems_go_straight_to_cp_sat_whatever_lns_min_conflicts_says() -> None:
+    """At or below exact_max_conflicts no first stage, re-insertion or LNS runs, even with
+    lns_min_conflicts lowered below it: CP-SAT proves the tiny problem."""
+    line = json.loads((DATA / "wh_25.jsonl").read_text().splitlines()[0])
+    body = {**line["request"], "options": {"solver": "auto", "time_limit_s": 5.0}}
+    policy = DispatchPolicy(exact_max_conflicts=10_000, lns_min_conflicts=0)
+    answer = dispatch(ScheduleRequest.model_validate(body), policy)
+    assert answer.solver.optimal
+    assert "reinsert" not in answer.solver.detail and "lns" not in answer.solver.detail
+    assert answer.cost == pytest.approx(line["ref_cost"], rel=1e-9)
