@@ -18,8 +18,8 @@ request with that ``options.time_limit_s`` (:data:`METHODS`):
 * ``auto_2cores``: ``auto`` given both cores of the 2-core machine
   (``exact_workers=2``: two CP-SAT workers, the search's batches evaluated in two
   threads), as a service running one solve at a time can be set up;
-* ``gnn_vae_refined``, ``tabu`` and ``lns`` (from FCFS's best blend) alone: each stage
-  alone;
+* ``gnn_vae_refined``, ``tabu``, ``lns`` and ``reinsert`` (the last two from FCFS's best
+  blend) alone: each stage alone;
 * ``exact``: plain CP-SAT hinted with FCFS.
 
 Problems: the conformance sets (optima proven by an independent MILP:
@@ -95,6 +95,7 @@ METHODS: dict[str, tuple[str, str, int, int | None]] = {
     "gnn_vae_refined": ("gnn_vae_refined", "gnn_vae_refined", 1, NO_LNS),
     "tabu": ("tabu", "gnn_vae_refined", 1, NO_LNS),
     "lns": ("lns", "priority_tabu", 1, NO_LNS),
+    "reinsert": ("reinsert", "priority_tabu", 1, NO_LNS),
     "exact": ("exact", "gnn_vae_refined", 1, NO_LNS),
 }
 TARGET_METHOD = "auto"  # the one method also run at the target budget
