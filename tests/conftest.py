@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from service.api.runtime import WARMUP_REQUEST
-from service.core.schemas import OptionsIn
-from service.solvers.dispatch import DispatchPolicy, dispatch
+from service.api.runtime import warm_solver
+from service.solvers.dispatch import DispatchPolicy
 
 
 @pytest.fixture(scope="session", autouse=True)
@@ -15,5 +14,4 @@ def compiled_search_kernels() -> None:
     any test, as the service's warm-up does before it reports ready: compiling them takes
     ~15 s on a fresh machine, which would otherwise land in whichever timed test first
     reaches the re-insertion stage of ``auto``."""
-    options = OptionsIn(solver="reinsert", time_limit_s=0.2)
-    dispatch(WARMUP_REQUEST.model_copy(update={"options": options}), DispatchPolicy())
+    warm_solver(DispatchPolicy(), "reinsert", 0.2)

@@ -34,6 +34,7 @@ __all__ = [
     "dispatch_policy",
     "load_models",
     "missing_solvers",
+    "warm_solver",
     "warm_up",
 ]
 
@@ -216,6 +217,13 @@ def load_models(runtime: Runtime, store: Path) -> None:
         log.warning("no GNN-VAE for %s (exact solver serves it): %s", objective, error)
 
 
+def warm_solver(policy: DispatchPolicy, solver: str, time_limit_s: float) -> None:
+    """Solve :data:`WARMUP_REQUEST` with ``solver`` (two samples where it samples), so that
+    its compiled kernels are loaded, or compiled, before anything is timed."""
+    options = OptionsIn(solver=solver, samples=2, time_limit_s=time_limit_s)
+    dispatch(WARMUP_REQUEST.model_copy(update={"options": options}), policy)
+
+
 def warm_up(runtime: Runtime) -> None:
     """Solve :data:`WARMUP_REQUEST` once (blocking), then mark ``runtime`` ready.
 
@@ -236,8 +244,7 @@ def warm_up(runtime: Runtime) -> None:
         # steps of milliseconds here, the first one compiling their kernels).
         warmed = dict.fromkeys([runtime.policy.large_solver, "gnn_vae_refined"], 10.0)
         for solver, limit_s in {**warmed, "lns": 0.5, "reinsert": 0.2}.items():
-            large = OptionsIn(solver=solver, samples=2, time_limit_s=limit_s)
-            dispatch(WARMUP_REQUEST.model_copy(update={"options": large}), runtime.policy)
+            warm_solver(runtime.policy, solver, limit_s)
         # The paths form: geometry, dependency plan, executor and clearance kernels.
         plan_paths(PATHS_WARMUP_REQUEST, runtime.policy, GeometrySettings())
     except Exception as exc:

@@ -145,6 +145,7 @@ def _passage(
     side: np.ndarray,  # (K,) int, the robot's side of each (0: a, 1: b)
     node: np.ndarray,  # (K,) int, the robot's node of each (0: its first)
     partner_pos: np.ndarray,  # (K,) float, each partner node's position
+    ranks: np.ndarray,  # (m,) float, the distinct partner positions, sorted
     force: np.ndarray,  # (K,) int, +1 the robot must pass first, -1 second, 0 free
     follow: np.ndarray,  # (K,) bool, following-type allowed
     live: np.ndarray,  # (2M,) bool
@@ -163,9 +164,7 @@ def _passage(
     times ``d`` are held (see the module); False if none exists (fixed directions
     against held times). Gap g of a node: its partners at the g smallest distinct
     positions pass first."""
-    k = conflicts.size
-    ranks = np.unique(partner_pos)
-    m = ranks.size
+    k, m = conflicts.size, ranks.size
     kidx = np.searchsorted(ranks, partner_pos)  # (K,) the partner passes first iff kidx < g
     # Each conflict's release (robot second) and deadline (robot first), at its type.
     rel_e = np.empty(k, dtype=np.int64)
@@ -283,32 +282,25 @@ def _repair(
             partner_pos[i] = pos[st.conf_nodes[c, 1 - s]]
             if st.forced[c] != 0:
                 force[i] = 1 if (st.forced[c] > 0) == (s == 0) else -1
-            if st.may_follow[c]:  # reserve room in every binding clique of it
-                follow[i] = True
-                for q in st.cq_clique[st.cq_start[c] : st.cq_start[c + 1]]:
-                    follow[i] = follow[i] and room[q] > 0
-                if follow[i]:
-                    for q in st.cq_clique[st.cq_start[c] : st.cq_start[c + 1]]:
-                        room[q] -= 1
+            follow[i] = st.may_follow[c] and _take_room(st, c, room)
         e0, e1 = st.ev_start[r], st.ev_start[r + 1]
         n_nodes = st.robot_start[r + 1] - st.robot_start[r]
         gap = np.empty(n_nodes, dtype=np.int64)
         first = np.empty(k, dtype=np.bool_)
         chosen = np.empty(k, dtype=np.bool_)
         ev_node = st.ev_node[e0:e1]
+        ranks = np.unique(partner_pos)
         if not _passage(
-            conflicts, side, node, partner_pos, force, follow, st.live, st.target,
+            conflicts, side, node, partner_pos, ranks, force, follow, st.live, st.target,
             st.source, st.offset, e0, ev_node, n_nodes, d, gap, first, chosen,
         ):  # fmt: skip
             return np.inf
+        _give_back(st, conflicts[follow & ~chosen], room)  # the room it did not need
         for i in range(k):
             c = conflicts[i]
-            if follow[i] and not chosen[i]:  # give back what it did not need
-                for q in st.cq_clique[st.cq_start[c] : st.cq_start[c + 1]]:
-                    room[q] += 1
             a_first[c] = first[i] == (side[i] == 0)
             following[c] = chosen[i] or st.fixed_type[c] == 1
-        _place(pos, st.robot_start[r], gap, np.unique(partner_pos))
+        _place(pos, st.robot_start[r], gap, ranks)
         placed[r] = True
         for e in range(e0, e1):
             cost += weight[e] * d[e]
@@ -542,6 +534,19 @@ def _give_back(st: _Static, conflicts: np.ndarray, room: np.ndarray) -> None:
     for c in conflicts:
         for q in st.cq_clique[st.cq_start[c] : st.cq_start[c + 1]]:
             room[q] += 1
+
+
+@numba.njit(cache=True, nogil=True)
+def _take_room(st: _Static, conflict: int, room: np.ndarray) -> bool:
+    """Whether every binding clique of ``conflict`` has room (Q,) for one more
+    following-type conflict; if so, that room is taken."""
+    cliques = st.cq_clique[st.cq_start[conflict] : st.cq_start[conflict + 1]]
+    for q in cliques:
+        if room[q] <= 0:
+            return False
+    for q in cliques:
+        room[q] -= 1
+    return True
 
 
 def _cheaper(
