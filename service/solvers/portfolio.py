@@ -65,8 +65,9 @@ from service.core.decompose import DECOMPOSABLE, Part, join, parts
 from service.solvers.exact import build_seconds, improve
 from service.solvers.lns import LNS_OBJECTIVES, LNS_ROBOTS, lns_search
 from service.solvers.registry import SolveContext, SolverOutput, get_solver, register
-from service.solvers.reinsert import REINSERT_OBJECTIVES, reinsert_search
+from service.solvers.reinsert import REINSERT_OBJECTIVES
 from service.solvers.tabu import plain_start, tabu_search
+from service.solvers.turns import take_turns
 
 __all__ = ["FIRST_STAGE_SHARE", "auto"]
 
@@ -211,13 +212,13 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
     if reinserts:
         left = deadline - time.monotonic()
         until = time.monotonic() + REINSERT_SHARE * left if uses_lns else deadline
-        found = reinsert_search(ctx, best.assignment, until, ctx.seed)
-        if found.cost < cost:
-            best, cost = replace(best, assignment=found.best), found.cost
-            stages.append(f"reinsert x{found.steps}")
+        turned = take_turns(ctx, best.assignment, cost, until, ctx.seed)
+        if turned.cost < cost:
+            best, cost = replace(best, assignment=turned.best), turned.cost
+            stages.append(f"re-insertion and priority x{turned.turns}")
         if not uses_lns:
             cap = ctx.exact_stage_max_conflicts
-            verdict = f"re-insertion to the deadline above {cap} conflicts"
+            verdict = f"re-insertion and priority search to the deadline above {cap} conflicts"
             return replace(best, optimal=False, detail=_detail(stages, verdict))
     if uses_lns:
         left = deadline - time.monotonic()

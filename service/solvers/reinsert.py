@@ -103,6 +103,15 @@ class _Static(NamedTuple):
 
     @classmethod
     def of(cls, ctx: SolveContext) -> _Static:
+        """The arrays of ``ctx``'s problem, built once per context (~13 ms at 22,000
+        conflicts, which searches taking turns with another would pay every turn)."""
+        cached = ctx.__dict__.get("_reinsert_static")
+        if cached is None:
+            cached = ctx.__dict__["_reinsert_static"] = cls._build(ctx)
+        return cached
+
+    @classmethod
+    def _build(cls, ctx: SolveContext) -> _Static:
         p, graph = ctx.problem, ctx.evaluator.graph
         n_conf = p.n_conflicts
         conf_robots = np.stack([p.node_robot[p.conf_a], p.node_robot[p.conf_b]], axis=1)

@@ -191,20 +191,21 @@ def test_auto_uses_its_budget_when_tabu_stops_early_and_no_cp_sat_follows() -> N
 def test_from_lns_min_conflicts_re_insertion_follows_the_first_stage(
     stage_cap: int | None, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """From lns_min_conflicts conflicts (lowered to 0) re-insertion search runs after the
-    first stage: to the deadline where neither LNS nor CP-SAT follows (above the cap, LNS
-    not paying), else for REINSERT_SHARE of the time left, then LNS; the answer is valid,
-    no better than the proven optimum, and comes within the budget."""
+    """From lns_min_conflicts conflicts (lowered to 0) re-insertion and priority search
+    take turns after the first stage: to the deadline where neither LNS nor CP-SAT
+    follows (above the cap, LNS not paying), else for REINSERT_SHARE of the time left,
+    then LNS; the answer is valid, no better than the proven optimum, and comes within
+    the budget."""
     import service.solvers.portfolio as portfolio
 
     untils: list[float] = []
-    original = portfolio.reinsert_search
+    original = portfolio.take_turns
 
-    def recorded(ctx: Any, start: Any, until: float, seed: int) -> Any:
+    def recorded(ctx: Any, start: Any, cost: float, until: float, seed: int) -> Any:
         untils.append(until)
-        return original(ctx, start, until, seed)
+        return original(ctx, start, cost, until, seed)
 
-    monkeypatch.setattr(portfolio, "reinsert_search", recorded)
+    monkeypatch.setattr(portfolio, "take_turns", recorded)
     line = json.loads((DATA / "wh_25.jsonl").read_text().splitlines()[0])
     body = {**line["request"], "options": {"solver": "auto", "time_limit_s": 1.0}}
     cap = {} if stage_cap is None else {"exact_stage_max_conflicts": stage_cap}
@@ -217,7 +218,7 @@ def test_from_lns_min_conflicts_re_insertion_follows_the_first_stage(
     if stage_cap is None:  # LNS follows: re-insertion stops well before the deadline
         assert untils[0] < start + 0.9
     else:
-        assert "re-insertion to the deadline" in answer.solver.detail
+        assert "re-insertion and priority search to the deadline" in answer.solver.detail
     assert answer.cost >= line["ref_cost"] * (1 - 1e-9)
     assert answer.checks.acyclic and answer.checks.density
 

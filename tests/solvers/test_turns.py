@@ -1,0 +1,81 @@
+"""Priority search and re-insertion in turns: priority search goes on from any valid
+answer (ranks that decode to it), and the turns return a valid answer no worse than
+their start, within their deadline (hypothesis over tiny, fixed-direction, small,
+stitched and conformance problems)."""
+
+from __future__ import annotations
+
+import json
+import time
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from service.core.check import check
+from service.solvers.priority import PriorityConfig, answer_ranks, priority_search
+from service.solvers.reinsert import reinsert_search
+from service.solvers.tabu import plain_start
+from service.solvers.turns import TurnsConfig, take_turns
+from tests.solvers.test_reinsert import DATA, FAMILIES, OBJECTIVES, SLOW, _context, _request
+
+
+@settings(max_examples=40, deadline=None, derandomize=True, suppress_health_check=SLOW)
+@given(
+    family=FAMILIES,
+    seed=st.integers(0, 10_000),
+    robots=st.integers(3, 30),
+    objective=st.sampled_from(OBJECTIVES),
+)
+def test_priority_search_goes_on_from_any_valid_answer(
+    family: str, seed: int, robots: int, objective: str
+) -> None:
+    """Ranks of a re-insertion search's answer decode to its directions (fixed ones
+    included), and priority search from them never returns worse or invalid."""
+    ctx = _context(_request(family, seed, robots), objective)
+    if ctx.problem.n_conflicts == 0:
+        return
+    found = reinsert_search(ctx, plain_start(ctx), np.inf, seed, max_steps=10)
+    ranks = answer_ranks(ctx, found.best)  # (V,)
+    assert np.array_equal(ctx.decoder.directions(ranks[None]), found.best.a_first)
+    cfg = PriorityConfig(max_rounds=20)
+    best, cost, rounds = priority_search(ctx, 60.0, seed, cfg, (ranks, found.best, found.cost))
+    assert rounds <= 20
+    assert cost <= found.cost
+    assert cost == float(ctx.evaluator.evaluate(best).costs[objective][0])
+    checks = check(ctx.problem, ctx.cliques, best)
+    assert checks.acyclic[0] and checks.density[0] and checks.forced[0]
+
+
+@settings(max_examples=15, deadline=None, derandomize=True, suppress_health_check=SLOW)
+@given(
+    family=FAMILIES,
+    seed=st.integers(0, 10_000),
+    robots=st.integers(3, 30),
+    objective=st.sampled_from(OBJECTIVES),
+)
+def test_turns_return_a_valid_answer_no_worse_than_their_start(
+    family: str, seed: int, robots: int, objective: str
+) -> None:
+    ctx = _context(_request(family, seed, robots), objective)
+    if ctx.problem.n_conflicts == 0:
+        return
+    start = plain_start(ctx)
+    start_cost = float(ctx.evaluator.evaluate(start).costs[objective][0])
+    config = TurnsConfig(turn_s=0.02, turn_share=1.0)
+    found = take_turns(ctx, start, start_cost, time.monotonic() + 0.1, seed, config)
+    assert found.cost <= start_cost
+    assert found.cost == float(ctx.evaluator.evaluate(found.best).costs[objective][0])
+    checks = check(ctx.problem, ctx.cliques, found.best)
+    assert checks.acyclic[0] and checks.density[0] and checks.forced[0]
+
+
+def test_turns_stop_at_their_deadline_and_take_several() -> None:
+    line = (DATA / "wh_50.jsonl").read_text().splitlines()[0]
+    ctx = _context(json.loads(line)["request"], "avg_completion")
+    start = plain_start(ctx)
+    cost = float(ctx.evaluator.evaluate(start).costs["avg_completion"][0])
+    begin = time.monotonic()
+    found = take_turns(ctx, start, cost, begin + 0.4, 0)
+    assert time.monotonic() - begin < 0.4 + 0.1
+    assert found.turns >= 3  # turns of at most a quarter of the time given
