@@ -13,10 +13,10 @@ comes first, improving in stages:
    measured better than the GNN-VAE refined by tabu search, ``gnn_vae_refined``), or
    tabu search from the previous answer in a re-schedule, with FIRST_STAGE_SHARE of
    the budget; from ``lns_min_conflicts`` conflicts (avg_completion, avg_delay; the first
-   stage then with REINSERT_FIRST_SHARE) followed by
-   re-insertion search (:mod:`service.solvers.reinsert`: neighbourhoods repaired by
-   prioritized planning, ~1-4 ms a step), with REINSERT_SHARE of the time left, or to
-   the deadline where no later stage runs;
+   stage then with REINSERT_FIRST_SHARE) followed by re-insertion search
+   (:mod:`service.solvers.reinsert`: neighbourhoods repaired by prioritized planning,
+   ~1-4 ms a step) and priority search in turns (:mod:`service.solvers.turns`), with
+   REINSERT_SHARE of the time left, or to the deadline where no later stage runs;
 3. **large-neighbourhood search** (above ``exact_max_conflicts`` up to
    ``exact_stage_max_conflicts``, for the objectives that are sums): CP-SAT re-plans
    a few robots at a time from the best answer so far (:mod:`service.solvers.lns`).
@@ -101,9 +101,13 @@ EXACT_TIME_PER_BUILD = 4
 # wh_parked, wh_mixed) 0.976 -> 0.955. So LNS from ~2.1-3.5 s left at ~95 per robot and
 # from 3.5-7 s at ~175: 0.03 s per conflict per robot (2.9 and 5.3 s; budgets of 4.1 and
 # 7.5 s), and never with less than LARGE_LNS_MIN_S left (with 2.1 s it broke even at
-# best; sparser fleets than these were not measured).
+# best; sparser fleets than these were not measured). Session 26, with re-insertion and
+# priority search in turns after the first stage (through the dispatcher, three worlds per
+# family): two-lane 250 at 5 s (3.5 s left, LNS paid by the old rule) turns then LNS
+# 0.828, turns to the deadline 0.859 (two seeds); at 10 s (one seed) turns then LNS
+# 0.928 / 0.921 (two-lane / two-way), turns alone 0.937 / 0.906: even. So at least 4 s.
 LARGE_LNS_S_PER_CONFLICT = 0.03
-LARGE_LNS_MIN_S = 3.0
+LARGE_LNS_MIN_S = 4.0
 LARGE_LNS_ROBOTS = 4
 # Share of the time after the first stage that LNS may take, below lns_min_conflicts,
 # before the CP-SAT stage (which proves optimality where it can): LNS stops sooner when
@@ -130,7 +134,10 @@ MID_LNS_SHARE = 0.5
 # 0.3 / 0.43 / 0.6 of the time left: 1 s 0.7262 / 0.7310 / 0.7307, 5 s 0.8625 / 0.8674 /
 # 0.8697 (flat). avg_delay (the same 12 warehouses, one seed, paired costs without / with
 # re-insertion): 1.21x at 1 s, 1.15x at 5 s (better on 8 of 12 at each, two-lane 1.1-1.4x,
-# two-way 250 0.97x at 1 s).
+# two-way 250 0.97x at 1 s). Since session 26 the stage is re-insertion and priority
+# search in turns (:mod:`service.solvers.turns`; through the dispatcher, 100-robot
+# warehouses, two seeds, 1 s / 5 s: two-way 0.766 -> 0.832 / 0.874 -> 0.908, two-lane
+# 0.850 -> 0.866 / 0.935 -> 0.921), the share left as it was.
 REINSERT_SHARE = 0.43
 # The first stage's share of the budget where re-insertion follows it (FIRST_STAGE_SHARE
 # elsewhere). Measured (session 25, the same 12 warehouses through the dispatcher, two
