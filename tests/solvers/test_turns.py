@@ -12,27 +12,37 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from service.core.assignment import Assignments
 from service.core.check import check
 from service.solvers.priority import PriorityConfig, answer_ranks, priority_search
+from service.solvers.registry import SolveContext
 from service.solvers.reinsert import reinsert_search
 from service.solvers.tabu import plain_start
 from service.solvers.turns import TurnsConfig, take_turns
 from tests.solvers.test_reinsert import DATA, FAMILIES, OBJECTIVES, SLOW, _context, _request
 
+# Problems of every family, with an objective re-insertion searches.
+CONTEXTS = st.builds(
+    lambda family, seed, robots, objective: _context(_request(family, seed, robots), objective),
+    FAMILIES,
+    st.integers(0, 10_000),
+    st.integers(3, 30),
+    st.sampled_from(OBJECTIVES),
+)
+
+
+def _assert_valid(ctx: SolveContext, answer: Assignments, cost: float) -> None:
+    """``answer`` passes the checker and costs ``cost`` by the one evaluator."""
+    checks = check(ctx.problem, ctx.cliques, answer)
+    assert checks.acyclic[0] and checks.density[0] and checks.forced[0]
+    assert cost == float(ctx.evaluator.evaluate(answer).costs[ctx.objective][0])
+
 
 @settings(max_examples=40, deadline=None, derandomize=True, suppress_health_check=SLOW)
-@given(
-    family=FAMILIES,
-    seed=st.integers(0, 10_000),
-    robots=st.integers(3, 30),
-    objective=st.sampled_from(OBJECTIVES),
-)
-def test_priority_search_goes_on_from_any_valid_answer(
-    family: str, seed: int, robots: int, objective: str
-) -> None:
+@given(ctx=CONTEXTS, seed=st.integers(0, 1000))
+def test_priority_search_goes_on_from_any_valid_answer(ctx: SolveContext, seed: int) -> None:
     """Ranks of a re-insertion search's answer decode to its directions (fixed ones
     included), and priority search from them never returns worse or invalid."""
-    ctx = _context(_request(family, seed, robots), objective)
     if ctx.problem.n_conflicts == 0:
         return
     found = reinsert_search(ctx, plain_start(ctx), np.inf, seed, max_steps=10)
@@ -42,32 +52,22 @@ def test_priority_search_goes_on_from_any_valid_answer(
     best, cost, rounds = priority_search(ctx, 60.0, seed, cfg, (ranks, found.best, found.cost))
     assert rounds <= 20
     assert cost <= found.cost
-    assert cost == float(ctx.evaluator.evaluate(best).costs[objective][0])
-    checks = check(ctx.problem, ctx.cliques, best)
-    assert checks.acyclic[0] and checks.density[0] and checks.forced[0]
+    _assert_valid(ctx, best, cost)
 
 
 @settings(max_examples=15, deadline=None, derandomize=True, suppress_health_check=SLOW)
-@given(
-    family=FAMILIES,
-    seed=st.integers(0, 10_000),
-    robots=st.integers(3, 30),
-    objective=st.sampled_from(OBJECTIVES),
-)
+@given(ctx=CONTEXTS, seed=st.integers(0, 1000))
 def test_turns_return_a_valid_answer_no_worse_than_their_start(
-    family: str, seed: int, robots: int, objective: str
+    ctx: SolveContext, seed: int
 ) -> None:
-    ctx = _context(_request(family, seed, robots), objective)
     if ctx.problem.n_conflicts == 0:
         return
     start = plain_start(ctx)
-    start_cost = float(ctx.evaluator.evaluate(start).costs[objective][0])
+    start_cost = float(ctx.evaluator.evaluate(start).costs[ctx.objective][0])
     config = TurnsConfig(turn_s=0.02, turn_share=1.0)
     found = take_turns(ctx, start, start_cost, time.monotonic() + 0.1, seed, config)
     assert found.cost <= start_cost
-    assert found.cost == float(ctx.evaluator.evaluate(found.best).costs[objective][0])
-    checks = check(ctx.problem, ctx.cliques, found.best)
-    assert checks.acyclic[0] and checks.density[0] and checks.forced[0]
+    _assert_valid(ctx, found.best, found.cost)
 
 
 def test_turns_stop_at_their_deadline_and_take_several() -> None:
