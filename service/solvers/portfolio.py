@@ -12,8 +12,9 @@ comes first, improving in stages:
    stalls, then tabu search; measured better than tabu search alone, which was
    measured better than the GNN-VAE refined by tabu search, ``gnn_vae_refined``), or
    tabu search from the previous answer in a re-schedule, with FIRST_STAGE_SHARE of
-   the budget; from ``lns_min_conflicts`` conflicts (avg_completion, avg_delay; the first
-   stage then with REINSERT_FIRST_SHARE) followed by re-insertion search
+   the budget. From ``lns_min_conflicts`` conflicts (avg_completion, avg_delay) instead
+   the cheapest of PLANNED_ORDERS prioritized plans of the whole fleet (milliseconds)
+   if cheaper than the instant answer, then re-insertion search
    (:mod:`service.solvers.reinsert`: neighbourhoods repaired by prioritized planning,
    ~1-4 ms a step) and priority search in turns (:mod:`service.solvers.turns`), with
    REINSERT_SHARE of the time left, or to the deadline where no later stage runs;
@@ -65,7 +66,7 @@ from service.core.decompose import DECOMPOSABLE, Part, join, parts
 from service.solvers.exact import build_seconds, improve
 from service.solvers.lns import LNS_OBJECTIVES, LNS_ROBOTS, lns_search
 from service.solvers.registry import SolveContext, SolverOutput, get_solver, register
-from service.solvers.reinsert import REINSERT_OBJECTIVES
+from service.solvers.reinsert import REINSERT_OBJECTIVES, planned_start
 from service.solvers.tabu import plain_start, tabu_search
 from service.solvers.turns import take_turns
 
@@ -139,12 +140,15 @@ MID_LNS_SHARE = 0.5
 # warehouses, two seeds, 1 s / 5 s: two-way 0.766 -> 0.832 / 0.874 -> 0.908, two-lane
 # 0.850 -> 0.866 / 0.935 -> 0.921), the share left as it was.
 REINSERT_SHARE = 0.43
-# The first stage's share of the budget where re-insertion follows it (FIRST_STAGE_SHARE
-# elsewhere). Measured (session 25, the same 12 warehouses through the dispatcher, two
-# seeds, mean cost ratio at 1 s / 5 s): 0.3 0.7342 / 0.8449 and 0.7264 / 0.8386, 0.15
-# 0.7310 / 0.8674 and 0.7368 / 0.8601 (5 s better on every family of the first seed),
-# 0.05 0.7200 / 0.8652 and 0.7358 / 0.8615.
-REINSERT_FIRST_SHARE = 0.15
+# From ``lns_min_conflicts`` conflicts the first stage is the cheapest of PLANNED_ORDERS
+# prioritized plans of the whole fleet (:func:`~service.solvers.reinsert.planned_start`,
+# ~1-2 ms a plan at 100 robots, 8-18 ms at 250), not priority search from the blend with
+# 15 % of the budget (session 25's REINSERT_FIRST_SHARE, measured then against 5 % and
+# 30 %). Measured (session 26, through the dispatcher, the 12 generated warehouses of 100
+# and 250 robots, two seeds, two runs side by side, mean cost ratio at 1 s / 5 s): the
+# old first stage 0.7673 / 0.8982, 4 plans 0.8073 / 0.9327 (every family better or even),
+# 8 plans 0.8098 / 0.9284, 16 plans 0.8024 / 0.9170.
+PLANNED_ORDERS = 4
 
 
 @register("auto")
@@ -205,13 +209,16 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
         and problem.n_conflicts > ctx.exact_max_conflicts
         and problem.n_conflicts >= ctx.lns_min_conflicts
     )
-    if problem.n_conflicts > ctx.exact_max_conflicts:
+    if reinserts:
+        planned, planned_cost = planned_start(ctx, PLANNED_ORDERS, ctx.seed)
+        if planned_cost < cost:
+            best, cost = SolverOutput(planned), planned_cost
+            stages.append(f"planned x{PLANNED_ORDERS}")
+    elif problem.n_conflicts > ctx.exact_max_conflicts:
         first = "tabu" if ctx.warm is not None else ctx.first_stage
         left = deadline - time.monotonic()
-        # Whether a stage follows.
-        shared = uses_lns or reinserts or (1 - FIRST_STAGE_SHARE) * left > exact_min_s
-        share = REINSERT_FIRST_SHARE if reinserts else FIRST_STAGE_SHARE
-        found = get_solver(first)(_with_time(ctx, share * left if shared else left))
+        shared = uses_lns or (1 - FIRST_STAGE_SHARE) * left > exact_min_s  # a stage follows
+        found = get_solver(first)(_with_time(ctx, FIRST_STAGE_SHARE * left if shared else left))
         found_cost = np.inf if found is None else _cost(ctx, found.assignment)
         if found is not None and found_cost <= cost:
             best, cost = found, found_cost

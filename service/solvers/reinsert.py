@@ -49,7 +49,13 @@ from service.core.evaluate import Evaluation
 from service.solvers.registry import SolveContext, SolverOutput, register
 from service.solvers.tabu import plain_start
 
-__all__ = ["REINSERT_OBJECTIVES", "ReinsertConfig", "ReinsertResult", "reinsert_search"]
+__all__ = [
+    "REINSERT_OBJECTIVES",
+    "ReinsertConfig",
+    "ReinsertResult",
+    "planned_start",
+    "reinsert_search",
+]
 
 # Objectives a repair's part of the cost stands for (sums over robots; measured for both,
 # see ``portfolio.REINSERT_SHARE``).
@@ -456,6 +462,58 @@ def reinsert_search(
             continue
         best, current, stalled = found[0], better, 0
     return ReinsertResult(best, current.cost, steps)
+
+
+def planned_start(ctx: SolveContext, orders: int, seed: int) -> tuple[Assignments, float]:
+    """The cheapest of ``orders`` prioritized plans of the whole fleet -> (answer, cost).
+
+    A plan puts every robot back, from none placed, in one order (:func:`_plan`): the
+    shortest free route first (the rule that minimises a single machine's summed
+    completion), the earliest free finish first, then random orders (``seed``). A plan
+    costs ~1-2 ms at 100 robots and ~8-18 ms at 250; on generated warehouses one reads
+    0.45-0.72 of the best known where the cheapest blend of FCFS reads 0.26-0.43."""
+    p = ctx.problem
+    free_end = p.free_time()  # (R,)
+    free_start = np.full(p.n_robots, np.inf)  # (R,) each robot's first time point
+    np.minimum.at(free_start, p.tp_robot, p.tp_time)
+    rng = np.random.default_rng(seed)
+    candidates = [
+        np.argsort(free_end - free_start, kind="stable"),
+        np.argsort(free_end, kind="stable"),
+    ]
+    candidates += [rng.permutation(p.n_robots) for _ in range(max(orders - len(candidates), 0))]
+    best, best_cost = None, np.inf
+    for order in candidates[:orders]:
+        found = _plan(ctx, order)
+        if found is None:
+            continue
+        cost = float(ctx.evaluator.evaluate(found).costs[ctx.objective][0])
+        if cost < best_cost:
+            best, best_cost = found, cost
+    if best is None:
+        return plain_start(ctx), float(
+            ctx.evaluator.evaluate(plain_start(ctx)).costs[ctx.objective][0]
+        )
+    return best, best_cost
+
+
+def _plan(ctx: SolveContext, order: np.ndarray) -> Assignments | None:
+    """Every robot put back in ``order`` (R,), robots fixed to pass another first moved
+    ahead of it (:func:`_fixed_first`), each on its passage past those placed before it
+    (None: some robot had none, against fixed directions)."""
+    p, st = ctx.problem, _Static.of(ctx)
+    every = np.arange(p.n_robots)
+    tails, heads = _fixed_between(st, every, np.ones(p.n_conflicts, dtype=bool))
+    following = p.fixed_type == 1  # (M,) realized types stay, and take their room
+    room = ctx.cliques.budget.astype(np.int64) - ctx.cliques.following_counts(following[None])[0]
+    a_first = np.zeros(p.n_conflicts, dtype=bool)
+    delay = np.zeros(p.events.size + 1)  # (E+1,)
+    pos = np.arange(p.n_nodes, dtype=np.float64)  # (V,) increasing along every path
+    cost = _repair(
+        _fixed_first(order.astype(np.int64), tails, heads), st, delay, pos, room, a_first,
+        following, _objective_weight(ctx),
+    )  # fmt: skip
+    return Assignments.single(a_first, following) if np.isfinite(cost) else None
 
 
 def _best_repair(

@@ -209,3 +209,38 @@ def test_the_search_stops_where_nobody_waits() -> None:
     ctx = _context(request, "avg_completion")
     found = reinsert.reinsert_search(ctx, plain_start(ctx), time.monotonic() + 5.0, 0)
     assert found.steps == 0
+
+
+@settings(max_examples=40, deadline=None, derandomize=True, suppress_health_check=SLOW)
+@given(
+    family=FAMILIES,
+    seed=st.integers(0, 10_000),
+    robots=st.integers(3, 30),
+    objective=st.sampled_from(OBJECTIVES),
+)
+def test_a_plan_of_the_whole_fleet_is_valid_and_its_first_robot_never_waits(
+    family: str, seed: int, robots: int, objective: str
+) -> None:
+    """Every robot put back from none placed, in a random order: the plan passes the
+    checker, and the robot put back first (none ahead of it fixed to pass it) finishes
+    at its free time; the cheapest of several plans costs what the evaluator says."""
+    ctx = _context(_request(family, seed, robots), objective)
+    problem = ctx.problem
+    if problem.n_conflicts == 0:
+        return
+    order = np.random.default_rng(seed).permutation(problem.n_robots)
+    plan = reinsert._plan(ctx, order)
+    if plan is None:  # only where fixed directions leave a robot no passage
+        assert problem.has_forced
+        return
+    checks = check(problem, ctx.cliques, plan)
+    assert checks.acyclic[0] and checks.density[0] and checks.forced[0]
+    static = reinsert._Static.of(ctx)
+    freed = np.ones(problem.n_conflicts, dtype=bool)
+    first = reinsert._fixed_first(order, *reinsert._fixed_between(static, order, freed))[0]
+    completion = ctx.evaluator.evaluate(plan).completion[0]
+    assert completion[first] == pytest.approx(problem.free_time()[first])
+    best, cost = reinsert.planned_start(ctx, 4, seed)
+    assert cost == float(ctx.evaluator.evaluate(best).costs[objective][0])
+    checks = check(problem, ctx.cliques, best)
+    assert checks.acyclic[0] and checks.density[0] and checks.forced[0]
