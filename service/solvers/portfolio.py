@@ -149,6 +149,7 @@ REINSERT_SHARE = 0.43
 # old first stage 0.7673 / 0.8982, 4 plans 0.8073 / 0.9327 (every family better or even),
 # 8 plans 0.8098 / 0.9284, 16 plans 0.8024 / 0.9170.
 PLANNED_ORDERS = 4
+PLANNED_SHARE = 0.1  # of the budget, after which no further plan starts (one at least)
 
 
 @register("auto")
@@ -210,10 +211,11 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
         and problem.n_conflicts >= ctx.lns_min_conflicts
     )
     if reinserts:
-        planned, planned_cost = planned_start(ctx, PLANNED_ORDERS, ctx.seed)
-        if planned_cost < cost:
-            best, cost = SolverOutput(planned), planned_cost
-            stages.append(f"planned x{PLANNED_ORDERS}")
+        until = time.monotonic() + PLANNED_SHARE * (deadline - time.monotonic())
+        planned = planned_start(ctx, PLANNED_ORDERS, ctx.seed, until)
+        if planned is not None and planned[1] < cost:
+            best, cost = SolverOutput(planned[0]), planned[1]
+            stages.append("planned")
     elif problem.n_conflicts > ctx.exact_max_conflicts:
         first = "tabu" if ctx.warm is not None else ctx.first_stage
         left = deadline - time.monotonic()

@@ -36,6 +36,7 @@ avg_delay is a proxy that the evaluation corrects. Deterministic for a seed.
 
 from __future__ import annotations
 
+import heapq
 import time
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -464,8 +465,12 @@ def reinsert_search(
     return ReinsertResult(best, current.cost, steps)
 
 
-def planned_start(ctx: SolveContext, orders: int, seed: int) -> tuple[Assignments, float]:
-    """The cheapest of ``orders`` prioritized plans of the whole fleet -> (answer, cost).
+def planned_start(
+    ctx: SolveContext, orders: int, seed: int, until: float
+) -> tuple[Assignments, float] | None:
+    """The cheapest of up to ``orders`` prioritized plans of the whole fleet -> (answer,
+    cost), or None where fixed directions left every plan tried without a passage for
+    some robot. Plans are made until ``until`` (monotonic), one at least.
 
     A plan puts every robot back, from none placed, in one order (:func:`_plan`): the
     shortest free route first (the rule that minimises a single machine's summed
@@ -477,24 +482,23 @@ def planned_start(ctx: SolveContext, orders: int, seed: int) -> tuple[Assignment
     free_start = np.full(p.n_robots, np.inf)  # (R,) each robot's first time point
     np.minimum.at(free_start, p.tp_robot, p.tp_time)
     rng = np.random.default_rng(seed)
-    candidates = [
-        np.argsort(free_end - free_start, kind="stable"),
-        np.argsort(free_end, kind="stable"),
-    ]
-    candidates += [rng.permutation(p.n_robots) for _ in range(max(orders - len(candidates), 0))]
-    best, best_cost = None, np.inf
-    for order in candidates[:orders]:
-        found = _plan(ctx, order)
-        if found is None:
+    found = None
+    for k in range(orders):
+        if k and time.monotonic() >= until:
+            break
+        if k == 0:
+            order = np.argsort(free_end - free_start, kind="stable")
+        elif k == 1:
+            order = np.argsort(free_end, kind="stable")
+        else:
+            order = rng.permutation(p.n_robots)
+        plan = _plan(ctx, order)
+        if plan is None:
             continue
-        cost = float(ctx.evaluator.evaluate(found).costs[ctx.objective][0])
-        if cost < best_cost:
-            best, best_cost = found, cost
-    if best is None:
-        return plain_start(ctx), float(
-            ctx.evaluator.evaluate(plain_start(ctx)).costs[ctx.objective][0]
-        )
-    return best, best_cost
+        cost = float(ctx.evaluator.evaluate(plan).costs[ctx.objective][0])
+        if found is None or cost < found[1]:
+            found = (plan, cost)
+    return found
 
 
 def _plan(ctx: SolveContext, order: np.ndarray) -> Assignments | None:
@@ -570,20 +574,24 @@ def _fixed_first(order: np.ndarray, tails: np.ndarray, heads: np.ndarray) -> np.
     after the rest."""
     if tails.size == 0:
         return order
-    waiting = {int(r): int(np.count_nonzero(heads == r)) for r in order}
+    place = {int(r): i for i, r in enumerate(order)}  # robot -> its index in order
+    waiting = np.zeros(order.size, dtype=np.int64)  # (k,) fixed arcs into each, by index
+    after: dict[int, list[int]] = {}
+    for tail, head in zip(tails.tolist(), heads.tolist(), strict=True):
+        waiting[place[head]] += 1
+        after.setdefault(place[tail], []).append(place[head])
+    ready = [i for i in range(order.size) if waiting[i] == 0]  # a heap: the earliest first
     out: list[int] = []
-    while len(out) < order.size:
-        ready = [int(r) for r in order if waiting.get(int(r), -1) == 0]
-        if not ready:
-            out += [int(r) for r in order if int(r) in waiting]
-            break
-        robot = ready[0]
-        del waiting[robot]
-        out.append(robot)
-        for head in heads[tails == robot]:
-            if int(head) in waiting:
-                waiting[int(head)] -= 1
-    return np.array(out, dtype=np.int64)
+    while ready:
+        i = heapq.heappop(ready)
+        out.append(i)
+        for j in after.get(i, ()):
+            waiting[j] -= 1
+            if waiting[j] == 0:
+                heapq.heappush(ready, j)
+    taken = np.zeros(order.size, dtype=bool)
+    taken[out] = True
+    return order[np.concatenate([out, np.flatnonzero(~taken)]).astype(np.int64)]
 
 
 @numba.njit(cache=True, nogil=True)
