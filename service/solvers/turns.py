@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 from service.core.assignment import Assignments
-from service.solvers.priority import PriorityConfig, answer_ranks, priority_search
+from service.solvers.priority import answer_ranks, priority_search
 from service.solvers.registry import SolveContext
 from service.solvers.reinsert import reinsert_search
 
@@ -56,7 +56,6 @@ def take_turns(
     until ``deadline`` (monotonic); each turn's searches get the next seed."""
     best, turns, share = start, 0, config.priority_share
     turn_s = min(config.turn_s, config.turn_share * (deadline - time.monotonic()))
-    cfg = PriorityConfig(refit_min_s=float("inf"))  # refits cost more than a turn gains
     while time.monotonic() < deadline:
         began, before = time.monotonic(), cost
         found = reinsert_search(
@@ -68,7 +67,8 @@ def take_turns(
         if left <= 0:
             break
         ranks = answer_ranks(ctx, best)
-        best, cost, _ = priority_search(ctx, left, seed + turns, cfg, (ranks, best, cost))
+        # Given less than PriorityConfig.refit_min_s (0.5 s) here, it refits no types.
+        best, cost, _ = priority_search(ctx, left, seed + turns, start=(ranks, best, cost))
         turns += 1
         if config.adapt:
             rate_r = (before - between) / max(middle - began, 1e-6)
