@@ -2,13 +2,20 @@
 
 The two searches get stuck in different places. Re-insertion
 (:mod:`service.solvers.reinsert`) re-plans a few robots with every other robot's times
-held, so it never delays a held robot: on the dense two-way warehouses of 250 robots
-(~175 conflicts per robot) it plateaued at 0.81 of the best known after 30 s on this
-project's slower bench machine. Priority search (:mod:`service.solvers.priority`) shifts
-one robot's priority against every robot it meets, delaying them where that pays, but
-its random shifts rarely find the fine re-orderings re-insertion finds in a step. In
-turns, each starts from the other's answer: priority search from ranks that decode to
-it (:func:`~service.solvers.priority.answer_ranks`), re-insertion from its directions.
+held, so it never delays a held robot: on a dense two-way warehouse of 250 robots (~175
+conflicts per robot) it plateaued at 0.81 of the best known after 20-30 s (the bench's
+slower Xeon), where priority search alone reached 0.88 in 30 s. Priority search
+(:mod:`service.solvers.priority`) shifts one robot's priority against every robot it
+meets, delaying them where that pays, but its random shifts rarely find the fine
+re-orderings re-insertion finds in a step: on a two-lane warehouse of 250 robots it
+reached 0.75 in 30 s, re-insertion 0.89 in 5 s. In turns, each starts from the other's
+answer: priority search from ranks that decode to it
+(:func:`~service.solvers.priority.answer_ranks`), re-insertion from its directions. The
+split of a turn follows the cost each search took off per second in the last one, so
+the search that pays on a fleet gets the time. Measured (docs/benchmarks.md,
+"Re-insertion and priority search in turns"): ``auto`` on the two-way warehouses of 250
+robots 0.61 -> 0.73 at 1 s and 0.79 -> 0.92 at 5 s against re-insertion alone; a fixed
+60/40 split read 0.68 and 0.89.
 """
 
 from __future__ import annotations
@@ -29,11 +36,10 @@ __all__ = ["TurnsConfig", "TurnsResult", "take_turns"]
 class TurnsConfig:
     """How long a turn lasts and how it is split."""
 
-    turn_s: float = 0.5  # a turn's length, at most
+    turn_s: float = 0.5  # a turn's length, at most (1 s measured the same)
     turn_share: float = 0.25  # ... and at most this share of the time given
-    priority_share: float = 0.6  # priority search's part of a turn, re-insertion the rest
-    adapt: bool = True
-    least_share: float = 0.1
+    priority_share: float = 0.6  # priority search's part of the first turn (0.4 the same)
+    least_share: float = 0.1  # the least part of a turn either search keeps
 
 
 class TurnsResult(NamedTuple):
@@ -70,12 +76,20 @@ def take_turns(
         # Given less than PriorityConfig.refit_min_s (0.5 s) here, it refits no types.
         best, cost, _ = priority_search(ctx, left, seed + turns, start=(ranks, best, cost))
         turns += 1
-        if config.adapt:
-            rate_r = (before - between) / max(middle - began, 1e-6)
-            rate_p = (between - cost) / max(time.monotonic() - middle, 1e-6)
-            if rate_r + rate_p > 0:
-                measured = rate_p / (rate_r + rate_p)
-                share = min(
-                    max(0.5 * share + 0.5 * measured, config.least_share), 1 - config.least_share
-                )
+        gains = (before - between, between - cost)
+        share = _next_share(config, share, gains, (middle - began, time.monotonic() - middle))
     return TurnsResult(best, cost, turns)
+
+
+def _next_share(
+    config: TurnsConfig, share: float, gains: tuple[float, float], seconds: tuple[float, float]
+) -> float:
+    """Priority search's part of the next turn: halfway from ``share`` to its part of the
+    cost taken off per second in the last turn (``gains`` and ``seconds`` of re-insertion,
+    then of priority search), within ``least_share`` of either end; unchanged where
+    neither took anything off."""
+    rates = [gain / max(spent, 1e-6) for gain, spent in zip(gains, seconds, strict=True)]
+    if sum(rates) <= 0:
+        return share
+    measured = rates[1] / sum(rates)
+    return min(max(0.5 * (share + measured), config.least_share), 1 - config.least_share)

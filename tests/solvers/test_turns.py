@@ -18,7 +18,7 @@ from service.solvers.priority import PriorityConfig, answer_ranks, priority_sear
 from service.solvers.registry import SolveContext
 from service.solvers.reinsert import reinsert_search
 from service.solvers.tabu import plain_start
-from service.solvers.turns import TurnsConfig, take_turns
+from service.solvers.turns import TurnsConfig, _next_share, take_turns
 from tests.solvers.test_reinsert import DATA, FAMILIES, OBJECTIVES, SLOW, _context, _request
 
 # Problems of every family, with an objective re-insertion searches.
@@ -79,3 +79,27 @@ def test_turns_stop_at_their_deadline_and_take_several() -> None:
     found = take_turns(ctx, start, cost, begin + 0.4, 0)
     assert time.monotonic() - begin < 0.4 + 0.1
     assert found.turns >= 3  # turns of at most a quarter of the time given
+
+
+@settings(max_examples=200, deadline=None, derandomize=True)
+@given(
+    share=st.floats(0.1, 0.9),
+    gains=st.tuples(st.floats(0, 1e3), st.floats(0, 1e3)),
+    seconds=st.tuples(st.floats(1e-4, 1.0), st.floats(1e-4, 1.0)),
+)
+def test_the_split_moves_toward_the_search_that_paid(
+    share: float, gains: tuple[float, float], seconds: tuple[float, float]
+) -> None:
+    """The next split stays within least_share of either end, is unchanged where neither
+    search took anything off, and lies between the last split and priority search's part
+    of the cost taken off per second."""
+    config = TurnsConfig()
+    nxt = _next_share(config, share, gains, seconds)
+    assert config.least_share <= nxt <= 1 - config.least_share
+    rate_r, rate_p = gains[0] / seconds[0], gains[1] / seconds[1]
+    if rate_r + rate_p == 0:
+        assert nxt == share
+        return
+    low, high = sorted((share, rate_p / (rate_r + rate_p)))
+    least, most = config.least_share, 1 - config.least_share
+    assert min(max(low, least), most) - 1e-12 <= nxt <= min(max(high, least), most) + 1e-12
