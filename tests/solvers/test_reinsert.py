@@ -48,6 +48,14 @@ def _context(request: dict, objective: str) -> SolveContext:
 
 
 FAMILIES = st.sampled_from(["tiny", "fixed", "small", "stitched", "conformance"])
+# Problems of every family, with an objective re-insertion searches.
+CONTEXTS = st.builds(
+    lambda family, seed, robots, objective: _context(_request(family, seed, robots), objective),
+    FAMILIES,
+    st.integers(0, 10_000),
+    st.integers(3, 30),
+    st.sampled_from(OBJECTIVES),
+)
 SLOW = [HealthCheck.too_slow]
 
 
@@ -216,20 +224,14 @@ def test_the_search_stops_where_nobody_waits() -> None:
 
 
 @settings(max_examples=40, deadline=None, derandomize=True, suppress_health_check=SLOW)
-@given(
-    family=FAMILIES,
-    seed=st.integers(0, 10_000),
-    robots=st.integers(3, 30),
-    objective=st.sampled_from(OBJECTIVES),
-)
+@given(ctx=CONTEXTS, seed=st.integers(0, 1000))
 def test_a_plan_of_the_whole_fleet_is_valid_and_its_first_robot_never_waits(
-    family: str, seed: int, robots: int, objective: str
+    ctx: SolveContext, seed: int
 ) -> None:
     """Every robot put back from none placed, in a random order: the plan passes the
     checker, and the robot put back first (none ahead of it fixed to pass it) finishes
     at its free time; the cheapest of several plans costs what the evaluator says."""
-    ctx = _context(_request(family, seed, robots), objective)
-    problem = ctx.problem
+    problem, objective = ctx.problem, ctx.objective
     if problem.n_conflicts == 0:
         return
     order = np.random.default_rng(seed).permutation(problem.n_robots)

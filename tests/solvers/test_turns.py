@@ -19,16 +19,7 @@ from service.solvers.registry import SolveContext
 from service.solvers.reinsert import reinsert_search
 from service.solvers.tabu import plain_start
 from service.solvers.turns import TurnsConfig, _next_share, take_turns
-from tests.solvers.test_reinsert import DATA, FAMILIES, OBJECTIVES, SLOW, _context, _request
-
-# Problems of every family, with an objective re-insertion searches.
-CONTEXTS = st.builds(
-    lambda family, seed, robots, objective: _context(_request(family, seed, robots), objective),
-    FAMILIES,
-    st.integers(0, 10_000),
-    st.integers(3, 30),
-    st.sampled_from(OBJECTIVES),
-)
+from tests.solvers.test_reinsert import CONTEXTS, DATA, SLOW, _context
 
 
 def _assert_valid(ctx: SolveContext, answer: Assignments, cost: float) -> None:
