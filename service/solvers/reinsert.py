@@ -486,6 +486,8 @@ def planned_start(
     free_start = np.full(p.n_robots, np.inf)  # (R,) each robot's first time point
     np.minimum.at(free_start, p.tp_robot, p.tp_time)
     rng = np.random.default_rng(seed)
+    every = np.arange(p.n_robots)
+    fixed = _fixed_between(_Static.of(ctx), every, np.ones(p.n_conflicts, dtype=bool))
     found = None
     for k in range(orders):
         if k and time.monotonic() >= until:
@@ -496,7 +498,7 @@ def planned_start(
             order = np.argsort(free_end, kind="stable")
         else:
             order = rng.permutation(p.n_robots)
-        plan = _plan(ctx, order)
+        plan = _plan(ctx, order, fixed)
         if plan is None:
             continue
         cost = float(ctx.evaluator.evaluate(plan).costs[ctx.objective][0])
@@ -505,20 +507,21 @@ def planned_start(
     return found
 
 
-def _plan(ctx: SolveContext, order: np.ndarray) -> Assignments | None:
-    """Every robot put back in ``order`` (R,), robots fixed to pass another first moved
-    ahead of it (:func:`_fixed_first`), each on its passage past those placed before it
-    (None: some robot had none, against fixed directions)."""
+def _plan(
+    ctx: SolveContext, order: np.ndarray, fixed: tuple[np.ndarray, np.ndarray]
+) -> Assignments | None:
+    """Every robot put back in ``order`` (R,), robots fixed to pass another first (the
+    arcs ``fixed`` of :func:`_fixed_between` over the whole fleet) moved ahead of it
+    (:func:`_fixed_first`), each on its passage past those placed before it (None: some
+    robot had none, against fixed directions)."""
     p, st = ctx.problem, _Static.of(ctx)
-    every = np.arange(p.n_robots)
-    tails, heads = _fixed_between(st, every, np.ones(p.n_conflicts, dtype=bool))
     following = p.fixed_type == 1  # (M,) realized types stay, and take their room
     room = ctx.cliques.budget.astype(np.int64) - ctx.cliques.following_counts(following[None])[0]
     a_first = np.zeros(p.n_conflicts, dtype=bool)
     delay = np.zeros(p.events.size + 1)  # (E+1,)
     pos = np.arange(p.n_nodes, dtype=np.float64)  # (V,) increasing along every path
     cost = _repair(
-        _fixed_first(order.astype(np.int64), tails, heads), st, delay, pos, room, a_first,
+        _fixed_first(order.astype(np.int64), *fixed), st, delay, pos, room, a_first,
         following, _objective_weight(ctx),
     )  # fmt: skip
     return Assignments.single(a_first, following) if np.isfinite(cost) else None

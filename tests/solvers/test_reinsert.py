@@ -235,15 +235,16 @@ def test_a_plan_of_the_whole_fleet_is_valid_and_its_first_robot_never_waits(
     if problem.n_conflicts == 0:
         return
     order = np.random.default_rng(seed).permutation(problem.n_robots)
-    plan = reinsert._plan(ctx, order)
+    static = reinsert._Static.of(ctx)
+    freed = np.ones(problem.n_conflicts, dtype=bool)
+    fixed = reinsert._fixed_between(static, np.arange(problem.n_robots), freed)
+    plan = reinsert._plan(ctx, order, fixed)
     if plan is None:  # only where fixed directions leave a robot no passage
         assert problem.has_forced
         return
     checks = check(problem, ctx.cliques, plan)
     assert checks.acyclic[0] and checks.density[0] and checks.forced[0]
-    static = reinsert._Static.of(ctx)
-    freed = np.ones(problem.n_conflicts, dtype=bool)
-    first = reinsert._fixed_first(order, *reinsert._fixed_between(static, order, freed))[0]
+    first = reinsert._fixed_first(order, *fixed)[0]
     completion = ctx.evaluator.evaluate(plan).completion[0]
     assert completion[first] == pytest.approx(problem.free_time()[first])
     found = reinsert.planned_start(ctx, 4, seed, np.inf)
