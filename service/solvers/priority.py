@@ -112,6 +112,15 @@ class RankFlips:
     which was decoded from the best's ranks.
     """
 
+    @classmethod
+    def of(cls, ctx: SolveContext) -> RankFlips:
+        """``ctx``'s, built once per context (~3 ms at 22,000 conflicts, which priority
+        search taking turns with re-insertion would pay every turn)."""
+        cached = ctx.__dict__.get("_rank_flips")
+        if cached is None:
+            cached = ctx.__dict__["_rank_flips"] = cls(ctx.problem)
+        return cached
+
     def __init__(self, problem: Problem) -> None:
         self.problem = problem
         nodes = np.concatenate([problem.conf_a, problem.conf_b])  # (2M,) node of each side
@@ -187,7 +196,7 @@ def priority_search(
     p, decoder, evaluator = ctx.problem, ctx.decoder, ctx.evaluator
     rng = np.random.default_rng(seed)
     base, best, best_cost = cheapest_blend(ctx) if start is None else start
-    flips = RankFlips(p)
+    flips = RankFlips.of(ctx)
     offsets = np.zeros(p.n_robots)  # (R,) the current (best) offsets
     ranks = decoder.repair(base[None])[0]  # (V,) the current best's repaired ranks
     step = cfg.wide_step if p.n_conflicts >= cfg.wide_from else cfg.step

@@ -488,6 +488,7 @@ def planned_start(
     rng = np.random.default_rng(seed)
     every = np.arange(p.n_robots)
     fixed = _fixed_between(_Static.of(ctx), every, np.ones(p.n_conflicts, dtype=bool))
+    weight = _objective_weight(ctx)
     found = None
     for k in range(orders):
         if k and time.monotonic() >= until:
@@ -498,7 +499,7 @@ def planned_start(
             order = np.argsort(free_end, kind="stable")
         else:
             order = rng.permutation(p.n_robots)
-        plan = _plan(ctx, order, fixed)
+        plan = _plan(ctx, order, fixed, weight)
         if plan is None:
             continue
         cost = float(ctx.evaluator.evaluate(plan).costs[ctx.objective][0])
@@ -508,12 +509,16 @@ def planned_start(
 
 
 def _plan(
-    ctx: SolveContext, order: np.ndarray, fixed: tuple[np.ndarray, np.ndarray]
+    ctx: SolveContext,
+    order: np.ndarray,
+    fixed: tuple[np.ndarray, np.ndarray],
+    weight: np.ndarray,
 ) -> Assignments | None:
     """Every robot put back in ``order`` (R,), robots fixed to pass another first (the
     arcs ``fixed`` of :func:`_fixed_between` over the whole fleet) moved ahead of it
     (:func:`_fixed_first`), each on its passage past those placed before it (None: some
-    robot had none, against fixed directions)."""
+    robot had none, against fixed directions); ``weight`` (E+1,) as
+    :func:`_objective_weight`."""
     p, st = ctx.problem, _Static.of(ctx)
     following = p.fixed_type == 1  # (M,) realized types stay, and take their room
     room = ctx.cliques.budget.astype(np.int64) - ctx.cliques.following_counts(following[None])[0]
@@ -522,7 +527,7 @@ def _plan(
     pos = np.arange(p.n_nodes, dtype=np.float64)  # (V,) increasing along every path
     cost = _repair(
         _fixed_first(order.astype(np.int64), *fixed), st, delay, pos, room, a_first,
-        following, _objective_weight(ctx),
+        following, weight,
     )  # fmt: skip
     return Assignments.single(a_first, following) if np.isfinite(cost) else None
 

@@ -238,7 +238,7 @@ def test_a_plan_of_the_whole_fleet_is_valid_and_its_first_robot_never_waits(
     static = reinsert._Static.of(ctx)
     freed = np.ones(problem.n_conflicts, dtype=bool)
     fixed = reinsert._fixed_between(static, np.arange(problem.n_robots), freed)
-    plan = reinsert._plan(ctx, order, fixed)
+    plan = reinsert._plan(ctx, order, fixed, reinsert._objective_weight(ctx))
     if plan is None:  # only where fixed directions leave a robot no passage
         assert problem.has_forced
         return
