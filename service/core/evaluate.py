@@ -367,6 +367,46 @@ def _relax_cyclic(
     return False
 
 
+@numba.njit(cache=True, nogil=True)
+def _latest_delays(
+    chain_next: np.ndarray,  # (E,) int
+    chain_indeg: np.ndarray,  # (E,) int
+    target: np.ndarray,  # (2M,) int
+    source: np.ndarray,  # (2, 2M) int
+    offset: np.ndarray,  # (2, 2M) float
+    live: np.ndarray,  # (2M,) bool
+    a_first: np.ndarray,  # (M,) uint8 of one sample
+    following: np.ndarray,  # (M,) uint8 of one sample
+    latest: np.ndarray,  # (E+1,) float, each event's cap on entry (inf: none); out: latest
+) -> bool:  # the constraint graph is acyclic (else ``latest`` is left as it came)
+    """Latest delays by a backward pass over one sample's arcs, in the reverse of the
+    forward walk's topological order: an event's latest is the least of its cap, its
+    chain successor's latest and each arc target's latest less the arc's offset."""
+    n_events, n_conflicts = chain_next.size, a_first.size
+    indeg, out_start, out_to, out_off, arc_of = _arc_arrays(n_events, n_conflicts)
+    _group_arcs(
+        target, source, offset, live, a_first, following, chain_indeg,
+        indeg, out_start, out_to, out_off, arc_of,
+    )  # fmt: skip
+    queue = np.empty(n_events + 1, dtype=np.int64)
+    removed = np.full(n_conflicts, -1, dtype=np.int64)
+    no_extra = np.full(n_events + 1, -1, dtype=np.int64)
+    if not _walk_arcs(
+        chain_next, indeg, out_start, out_to, out_off, removed, 0, no_extra,
+        no_extra[:0], no_extra[:0], out_off[:0], np.zeros(n_events + 1), queue,
+    ):  # fmt: skip
+        return False
+    for q in range(n_events, -1, -1):
+        e = queue[q]
+        value = latest[e]
+        for k in range(out_start[e], out_start[e + 1]):
+            value = min(value, latest[out_to[k]] - out_off[k])
+        if e < n_events and chain_next[e] >= 0:
+            value = min(value, latest[chain_next[e]])
+        latest[e] = value
+    return True
+
+
 class Evaluator:
     """Evaluates batches of assignments of one problem; build once, call many times.
 
@@ -518,6 +558,25 @@ class Evaluator:
         tol = 1e-9 * max(1.0, float(np.abs(self.problem.tp_time).max(initial=0.0)))
         tight = np.abs(target - delay[source] - offset) <= tol
         return (target > tol) & tight & ~self.problem.realized
+
+    def latest_delays(
+        self, assignments: Assignments, evaluation: Evaluation, held: np.ndarray, sample: int = 0
+    ) -> np.ndarray:
+        """(E+1,) the latest delay of every event of one evaluated sample such that raising
+        any events' delays up to these (and what follows from them) leaves every ``held``
+        (E+1,) bool event at its least delay: where a robot waits further on, its earlier
+        events may be delayed up to that wait for free. Held events keep their least
+        delays; the others are capped by what follows them only (inf if nothing held does).
+
+        Raises:
+            ValueError: the sample's constraint graph has a cycle.
+        """
+        latest = np.where(held, evaluation.event_delay[sample], np.inf)  # (E+1,)
+        a_first = np.ascontiguousarray(assignments.a_first[sample], dtype=bool).view(np.uint8)
+        following = np.ascontiguousarray(assignments.following[sample], dtype=bool).view(np.uint8)
+        if not _latest_delays(*self._fixed, a_first, following, latest):
+            raise ValueError("the assignment's constraint graph has a cycle")
+        return np.maximum(latest, evaluation.event_delay[sample])  # rounding: never below
 
     def delays_at(self, evaluation: Evaluation, sample: int, time_points: np.ndarray) -> np.ndarray:
         """Delays D at the given time points of one evaluated sample (same shape)."""

@@ -27,11 +27,20 @@ only while every binding density clique of it has room left (held and placed con
 counted), and kept only where the exclusive constraint would not hold: the budgets
 always hold.
 
-The held robots keep their times, so a repaired neighbourhood never delays them; their
-least times can only fall when the picked robots leave their way (the exact evaluation
-that decides counts that too). Objectives: the sums, as :mod:`service.solvers.lns`
-(avg_completion, avg_delay); a passage minimises its robot's last delay, which for
-avg_delay is a proxy that the evaluation corrects. Deterministic for a seed.
+A picked robot waits for a held partner's least time, and may pass first as long as
+the partner is then delayed no further than its *latest* delay
+(:meth:`~service.core.evaluate.Evaluator.latest_delays` of the incumbent): the latest
+that leaves every robot's part of the objective where it was. A held robot that waits
+further on can be delayed for free up to that wait; where robots queue, that is where
+the room is (on generated warehouses of 100-250 robots, a third of the events have
+some). Delays up to the latest never add up to more (a schedule below the latest stays
+below it), so the held robots' part stays; the picked robots' part is exact unless a
+robot pushed a held partner that it (or another picked robot) waits for further on,
+which then releases it later than planned: the exact evaluation that decides counts
+that. Objectives: the sums, as
+:mod:`service.solvers.lns` (avg_completion, avg_delay; for avg_delay every event is in
+the objective, so no event has room); a passage minimises its robot's last delay, which
+for avg_delay is a proxy that the evaluation corrects. Deterministic for a seed.
 
 **A plan** (:func:`planned_start`) is the same repair of the whole fleet from no robot
 placed: prioritized planning in one order, each robot on its exact passage past those
@@ -176,6 +185,7 @@ def _passage(
     ev_node: np.ndarray,  # (N,) int, the robot's node of each of its N events
     n_nodes: int,
     d: np.ndarray,  # (E+1,) float, the placed robots' delays; the robot's written on exit
+    latest: np.ndarray,  # (E+1,) float, the latest delays the placed robots' events may take
     gap: np.ndarray,  # (n_nodes,) int, out: each node's gap among the sorted partner positions
     first: np.ndarray,  # (K,) bool, out: the robot passes first
     following: np.ndarray,  # (K,) bool, out: following-type
@@ -199,7 +209,7 @@ def _passage(
         if live[second]:
             rel_v[i] = d[source[t, second]] + offset[t, second]
         if live[first_slot]:
-            dl_v[i] = d[target[first_slot]] - offset[t, first_slot]
+            dl_v[i] = latest[target[first_slot]] - offset[t, first_slot]
     # least[g]: least delay so far with the current node in gap g; back[n, g]: the gap
     # of node n-1 that least[g] came from on entering node n.
     least = np.zeros(m + 1)
@@ -268,6 +278,7 @@ def _repair(
     order: np.ndarray,  # (k,) int, the picked robots in the order they are put back
     st: _Static,
     d: np.ndarray,  # (E+1,) float, the incumbent's delays; the picked robots' rewritten
+    latest: np.ndarray,  # (E+1,) float, the held robots' latest delays; the picked ones' set
     pos: np.ndarray,  # (V,) float, a topological order; the picked robots' nodes moved
     room: np.ndarray,  # (Q,) int, following-type conflicts each binding clique has left
     a_first: np.ndarray,  # (M,) bool, rewritten on the picked robots' conflicts
@@ -312,7 +323,7 @@ def _repair(
         ranks = np.unique(partner_pos)
         if not _passage(
             conflicts, side, node, partner_pos, ranks, force, follow, st.live, st.target,
-            st.source, st.offset, e0, ev_node, n_nodes, d, gap, first, chosen,
+            st.source, st.offset, e0, ev_node, n_nodes, d, latest, gap, first, chosen,
         ):  # fmt: skip
             return np.inf
         _give_back(st, conflicts[follow & ~chosen], room)  # the room it did not need
@@ -321,6 +332,7 @@ def _repair(
             a_first[c] = first[i] == (side[i] == 0)
             following[c] = chosen[i] or st.fixed_type[c] == 1
         _place(pos, st.robot_start[r], gap, ranks)
+        latest[e0:e1] = d[e0:e1]  # robots placed in this repair keep their times
         placed[r] = True
         for e in range(e0, e1):
             cost += weight[e] * d[e]
@@ -393,6 +405,7 @@ class _Incumbent:
     following: np.ndarray  # (M,) bool
     cost: float
     delay: np.ndarray  # (E+1,) least delays
+    latest: np.ndarray  # (E+1,) latest delays leaving every robot's part of the objective
     pos: np.ndarray  # (V,) float, a topological order of the node graph
     counts: np.ndarray  # (Q,) following-type conflicts per clique
     robot_delay: np.ndarray  # (R,) each robot's delay at completion
@@ -400,15 +413,22 @@ class _Incumbent:
 
     @classmethod
     def of(
-        cls, ctx: SolveContext, answer: Assignments, evaluation: Evaluation, pos: np.ndarray
+        cls,
+        ctx: SolveContext,
+        answer: Assignments,
+        evaluation: Evaluation,
+        pos: np.ndarray,
+        weight: np.ndarray,
     ) -> _Incumbent:
         """``answer`` with its evaluation and a topological order ``pos`` (V,) of its node
-        graph (re-ranked to 0..V-1: repairs split gaps, which would shrink without end)."""
+        graph (re-ranked to 0..V-1: repairs split gaps, which would shrink without end);
+        ``weight`` (E+1,) as :func:`_objective_weight`."""
         return cls(
             answer.a_first[0],
             answer.following[0],
             float(evaluation.costs[ctx.objective][0]),
             evaluation.event_delay[0],
+            ctx.evaluator.latest_delays(answer, evaluation, weight > 0),
             np.argsort(np.argsort(pos, kind="stable")).astype(np.float64),
             ctx.cliques.following_counts(answer.following)[0],
             evaluation.completion[0] - ctx.problem.free_time(),
@@ -446,7 +466,7 @@ def reinsert_search(
     rank = ctx.orientation.topological_rank(start.a_first[0])
     if rank is None:
         raise ValueError("the answer to search from closes a cycle")
-    current = _Incumbent.of(ctx, start, ctx.evaluator.evaluate(start), rank)
+    current = _Incumbent.of(ctx, start, ctx.evaluator.evaluate(start), rank, weight)
     best = start
     n_robots, steps = ctx.problem.n_robots, 0
     count, stalled = min(config.robots, n_robots), 0
@@ -461,7 +481,7 @@ def reinsert_search(
         )  # fmt: skip
         found = _best_repair(ctx, st, current, picked, budget, weight, rng, config.orders)
         steps += 1
-        better = None if found is None else _cheaper(ctx, current, *found)
+        better = None if found is None else _cheaper(ctx, current, *found, weight)
         if better is None:
             stalled += 1
             continue
@@ -526,8 +546,8 @@ def _plan(
     delay = np.zeros(p.events.size + 1)  # (E+1,)
     pos = np.arange(p.n_nodes, dtype=np.float64)  # (V,) increasing along every path
     cost = _repair(
-        _fixed_first(order.astype(np.int64), *fixed), st, delay, pos, room, a_first,
-        following, weight,
+        _fixed_first(order.astype(np.int64), *fixed), st, delay, delay.copy(), pos, room,
+        a_first, following, weight,
     )  # fmt: skip
     return Assignments.single(a_first, following) if np.isfinite(cost) else None
 
@@ -556,8 +576,9 @@ def _best_repair(
         order = _fixed_first(rng.permutation(picked), tails, heads)
         a_first, following, pos = current.a_first.copy(), base_following.copy(), current.pos.copy()
         cost = _repair(
-            order, st, current.delay.copy(), pos, room.copy(), a_first, following, weight
-        )
+            order, st, current.delay.copy(), current.latest.copy(), pos, room.copy(), a_first,
+            following, weight,
+        )  # fmt: skip
         if cost < found_cost:
             found, found_cost = (Assignments.single(a_first, following), pos), cost
     return found
@@ -637,7 +658,11 @@ def _take_room(st: _Static, conflict: int, room: np.ndarray) -> bool:
 
 
 def _cheaper(
-    ctx: SolveContext, current: _Incumbent, found: Assignments, pos: np.ndarray
+    ctx: SolveContext,
+    current: _Incumbent,
+    found: Assignments,
+    pos: np.ndarray,
+    weight: np.ndarray,
 ) -> _Incumbent | None:
     """``found`` (node positions ``pos`` (V,)) as the new incumbent if the evaluator finds
     it cheaper; None otherwise, and (a guard: repairs exclude both by construction) if
@@ -652,7 +677,7 @@ def _cheaper(
     along = p.node_robot[1:] == p.node_robot[:-1]  # (V-1,) path arcs v -> v+1
     if (pos[tail] >= pos[head]).any() or (pos[1:][along] <= pos[:-1][along]).any():
         return None
-    incumbent = _Incumbent.of(ctx, found, evaluation, pos)
+    incumbent = _Incumbent.of(ctx, found, evaluation, pos, weight)
     if (incumbent.counts > ctx.cliques.budget).any():
         return None
     return incumbent

@@ -400,6 +400,54 @@ def test_only_binding_conflicts_hold_robots_back(seed: int) -> None:
         np.testing.assert_allclose(dropped.completion, evaluation.completion, rtol=1e-12)
 
 
+def _walk_with_floor(problem: Problem, assignment: Assignments, floor: np.ndarray) -> np.ndarray:
+    """(E+1,) least delays of one assignment with each event's delay at least ``floor``."""
+    ev = Evaluator(problem)
+    delay = floor[None].copy()  # (1, E+1) the walk raises lower bounds
+    a_first = assignment.a_first.astype(np.uint8)
+    following = assignment.following.astype(np.uint8)
+    assert evaluate._longest_paths(*ev._fixed, a_first, following, delay)[0]
+    return delay[0]
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 10_000), stitched=st.booleans())
+def test_latest_delays_are_the_latest_that_keep_the_held_events(seed: int, stitched: bool) -> None:
+    """Held events (here completions) keep their least delays; any other event delayed
+    up to its latest (a floor on it, the rest walked again) leaves every held event where
+    it was, and a second past it raises one (or it has no latest: inf)."""
+    request = stitched_problem(seed, 10, 3.0) if stitched else small_problem(seed)
+    problem = _problem(request)
+    rng = np.random.default_rng(seed)
+    assignment = Decoder(problem, find_cliques(problem)).decode(
+        rng.exponential(size=(1, problem.n_nodes)) + 1e-3, rng.random((1, problem.n_conflicts))
+    )
+    ev = Evaluator(problem)
+    evaluation = ev.evaluate(assignment)
+    least = evaluation.event_delay[0]  # (E+1,)
+    held = np.zeros(least.size, dtype=bool)
+    held[ev.graph.last_event] = True
+    latest = ev.latest_delays(assignment, evaluation, held)
+    assert (latest >= least - 1e-9).all()
+    np.testing.assert_array_equal(latest[held], least[held])
+    free = np.flatnonzero(~held[:-1])  # events, the zero-delay source left out
+    for e in rng.choice(free, size=min(8, free.size), replace=False) if free.size else ():
+        floor = np.zeros(least.size)
+        floor[e] = latest[e] if np.isfinite(latest[e]) else least[e] + 1e6
+        np.testing.assert_allclose(_walk_with_floor(problem, assignment, floor)[held], least[held])
+        if np.isfinite(latest[e]):
+            floor[e] = latest[e] + 1.0
+            assert (_walk_with_floor(problem, assignment, floor)[held] > least[held] + 0.5).any()
+
+
+def test_latest_delays_refuse_a_cycle() -> None:
+    problem = _problem(trap_request())
+    ev = Evaluator(problem)
+    cyclic = Assignments.single([True] * 3, [False] * 3)  # a positive cycle: no least times
+    with pytest.raises(ValueError, match="cycle"):
+        ev.latest_delays(cyclic, ev.evaluate(cyclic), np.ones(ev.n_events + 1, dtype=bool))
+
+
 def test_an_empty_batch_has_empty_results() -> None:
     problem = _problem(small_problem(3))
     empty = np.zeros((0, problem.n_conflicts), dtype=bool)

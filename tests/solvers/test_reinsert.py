@@ -63,7 +63,8 @@ def _incumbent(ctx: SolveContext) -> reinsert._Incumbent:
     start = plain_start(ctx)
     rank = ctx.orientation.topological_rank(start.a_first[0])
     assert rank is not None
-    return reinsert._Incumbent.of(ctx, start, ctx.evaluator.evaluate(start), rank)
+    evaluation = ctx.evaluator.evaluate(start)
+    return reinsert._Incumbent.of(ctx, start, evaluation, rank, reinsert._objective_weight(ctx))
 
 
 @settings(max_examples=60, deadline=None, derandomize=True, suppress_health_check=SLOW)
@@ -73,14 +74,17 @@ def _incumbent(ctx: SolveContext) -> reinsert._Incumbent:
     robots=st.integers(3, 30),
     picked=st.integers(1, 8),
     objective=st.sampled_from(OBJECTIVES),
+    slack=st.booleans(),
 )
 def test_every_repair_is_valid_and_its_times_are_a_schedule_of_it(
-    family: str, seed: int, robots: int, picked: int, objective: str
+    family: str, seed: int, robots: int, picked: int, objective: str, slack: bool
 ) -> None:
     """Whatever robots are put back, in whatever order: the answer passes the checker
     (acyclic, within every density budget, fixed directions honoured), its positions are a
-    topological order of its node graph, and the times the repair held and planned satisfy
-    every constraint of it, so its least delays are no larger, event by event."""
+    topological order of its node graph, and its times satisfy every constraint of it with
+    a picked robot released by its partner's least time and passing first no later than
+    the partner's latest. Held at their least times (no slack), the repair's times are a
+    schedule of its answer, so its least delays are no larger, event by event."""
     ctx = _context(_request(family, seed, robots), objective)
     problem = ctx.problem
     if problem.n_conflicts == 0:
@@ -94,8 +98,9 @@ def test_every_repair_is_valid_and_its_times_are_a_schedule_of_it(
     reinsert._give_back(static, np.flatnonzero(current.following & freed), room)
     a_first, following = current.a_first.copy(), current.following & ~freed
     delay, pos = current.delay.copy(), current.pos.copy()
+    latest = current.latest.copy() if slack else current.delay.copy()
     weight = reinsert._objective_weight(ctx)
-    cost = reinsert._repair(order, static, delay, pos, room, a_first, following, weight)
+    cost = reinsert._repair(order, static, delay, latest, pos, room, a_first, following, weight)
     if not np.isfinite(cost):  # only where fixed directions leave a robot no passage
         assert problem.has_forced
         return
@@ -105,10 +110,26 @@ def test_every_repair_is_valid_and_its_times_are_a_schedule_of_it(
     tail = np.where(a_first, problem.conf_a, problem.conf_b)
     head = np.where(a_first, problem.conf_b, problem.conf_a)
     assert (pos[tail] < pos[head]).all()
-    least = ctx.evaluator.evaluate(found).event_delay[0]
-    assert (least <= delay + 1e-6).all()
     mine = _events_of(ctx, order)
+    _assert_passages_keep_their_bounds(ctx, found, delay, latest, mine)
+    if not slack:
+        assert (ctx.evaluator.evaluate(found).event_delay[0] <= delay + 1e-6).all()
     assert cost == pytest.approx(float(weight[mine] @ delay[mine]))
+
+
+def _assert_passages_keep_their_bounds(
+    ctx: SolveContext, found: Assignments, delay: np.ndarray, latest: np.ndarray, mine: np.ndarray
+) -> None:
+    """Every live constraint of ``found`` holds between the repair's delays (E+1,), with
+    a held event waited for at ``delay`` and one waiting at (up to) its ``latest``; where
+    both sides are held, the incumbent's constraint, unchanged."""
+    graph = ctx.evaluator.graph
+    slot = 2 * np.arange(ctx.problem.n_conflicts) + found.a_first[0]  # (M,) active slots
+    kind = found.following[0].astype(np.intp)
+    source, target = graph.source[kind, slot], graph.target[slot]  # (M,)
+    live = graph.live[slot] & (mine[source] | mine[target])
+    waiting = np.where(mine[target], delay[target], latest[target])
+    assert (waiting[live] >= delay[source][live] + graph.offset[kind, slot][live] - 1e-6).all()
 
 
 def _events_of(ctx: SolveContext, robots: np.ndarray) -> np.ndarray:
@@ -137,10 +158,10 @@ def test_a_lone_robot_never_finishes_later_than_it_did(family: str, seed: int, r
         freed = reinsert._freed(static, order, problem.n_conflicts)
         room = ctx.cliques.budget.astype(np.int64) - current.counts
         a_first, following = current.a_first.copy(), current.following & ~freed
-        delay = current.delay.copy()
         cost = reinsert._repair(
-            order, static, delay, current.pos.copy(), room, a_first, following, weight
-        )
+            order, static, current.delay.copy(), current.latest.copy(), current.pos.copy(),
+            room, a_first, following, weight,
+        )  # fmt: skip
         had = float(weight[_events_of(ctx, order)] @ current.delay[_events_of(ctx, order)])
         assert cost <= had + 1e-9
 
