@@ -559,6 +559,23 @@ class Evaluator:
         tight = np.abs(target - delay[source] - offset) <= tol
         return (target > tol) & tight & ~self.problem.realized
 
+    def objective_weights(self, objective: Objective) -> np.ndarray:
+        """(E+1,) each event delay's weight in a sum objective, per robot: its completion
+        event's 1 for avg_completion (completion = free time + that delay), the mean's
+        weights for avg_delay (the zero-delay slot E weighs nothing).
+
+        Raises:
+            ValueError: ``objective`` is not a sum over robots.
+        """
+        if objective == "avg_delay":
+            return self._delay_weight.copy()
+        if objective != "avg_completion":
+            raise ValueError(f"{objective} is not a sum over robots")
+        weight = np.zeros(self.n_events + 1)
+        weight[self._last_event] = 1.0
+        weight[-1] = 0.0  # robots with no event
+        return weight
+
     def latest_delays(
         self, assignments: Assignments, evaluation: Evaluation, held: np.ndarray, sample: int = 0
     ) -> np.ndarray:

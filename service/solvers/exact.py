@@ -169,6 +169,9 @@ class Delays:
 
     var: np.ndarray  # int64 proto index, -1 where the delay is known
     known: np.ndarray  # int64 the delay where var is -1 (elsewhere unread)
+    # int64 the most a known delay may become where a variable one passes first (a held
+    # robot delayed up to its latest, see Evaluator.latest_delays); None: the known one.
+    latest: np.ndarray | None = None
 
 
 # The least search time CP-SAT gets when building its model used up the time limit.
@@ -383,7 +386,8 @@ def add_waits(
     target_var, source_var = delays.var[slots.target], delays.var[slots.source]
     target_known, source_known = delays.known[slots.target], delays.known[slots.source]
     after = source_known + slots.offset  # (S,) least target delay behind a known source
-    before = target_known - slots.offset  # (S,) most source delay ahead of a known target
+    target_latest = target_known if delays.latest is None else delays.latest[slots.target]
+    before = target_latest - slots.offset  # (S,) most source delay ahead of a known target
     for rows, lits in slots.enforcing(a_first, following):
         both = rows & (target_var >= 0) & (source_var >= 0)
         add_linear(

@@ -32,11 +32,16 @@ sub-problem orders the picked robots' nodes and the held nodes its conflicts
 touch (*boundary* nodes), with one precedence per pair of boundary nodes that
 the held graph connects (see ``_Neighbourhood._order``).
 
-The held robots keep their times in the sub-problem's answer, so their least
-times can only fall: a cheaper sub-problem answer is a cheaper assignment. Times
-are on CP-SAT's integer grid (:func:`~service.solvers.exact.integer_times`), the
-held times too (the least times of the grid-rounded problem, so that the hint is
-feasible); every accepted answer is re-evaluated exactly.
+A picked robot waits for a held robot's least times, and may pass one first as long
+as that delays it no further than its latest delays
+(:meth:`~service.core.evaluate.Evaluator.latest_delays`, which leave every robot's
+part of the objective where it was), as in :mod:`service.solvers.reinsert`: the held
+robots' part stays, and the sub-problem's own part is exact unless a picked robot
+waits further on for a held robot that a picked robot pushed (the evaluation that
+decides counts that). Times are on CP-SAT's integer grid
+(:func:`~service.solvers.exact.integer_times`), the held times too (the least and
+latest times of the grid-rounded problem, so that the hint is feasible); every
+accepted answer is re-evaluated exactly.
 
 Objectives: the sums (avg_completion, avg_delay); max_completion and
 sync_completion are not searched this way (a few robots rarely move a maximum,
@@ -232,6 +237,7 @@ class _Incumbent:
     cost: float
     delay: np.ndarray  # (R,) each robot's delay at completion
     grid_delay: np.ndarray  # (E+1,) int64 least delays on CP-SAT's grid
+    grid_latest: np.ndarray  # (E+1,) int64 latest delays keeping each robot's part, on it
     rank: np.ndarray  # (V,) node positions in a topological order
     counts: np.ndarray  # (Q,) following-type conflicts per clique
     waits: csr_array  # (R, R) binding waits between each pair of robots (either way)
@@ -247,13 +253,17 @@ class _Incumbent:
     ) -> _Incumbent:
         """``answer`` with its topological rank and its evaluation (both already found)."""
         a_first, following = answer.a_first[0], answer.following[0]
-        grid = np.rint(fleet.grid.evaluate(answer).event_delay[0] * fleet.scale).astype(np.int64)
+        on_grid = fleet.grid.evaluate(answer)
+        grid = np.rint(on_grid.event_delay[0] * fleet.scale).astype(np.int64)
+        held = fleet.grid.objective_weights(ctx.objective) > 0
+        latest = fleet.grid.latest_delays(answer, on_grid, held)  # (E+1,) inf: unbounded
         return cls(
             a_first,
             following,
             float(evaluation.costs[ctx.objective][0]),
             evaluation.completion[0] - ctx.problem.free_time(),
             grid,
+            np.rint(np.minimum(latest * fleet.scale, fleet.horizon)).astype(np.int64),
             rank,
             ctx.cliques.following_counts(following[None])[0],
             _binding_waits(fleet, a_first, following, grid),
@@ -306,7 +316,9 @@ class _Neighbourhood:
         f_lit[self.conflicts] = new_vars(model, k, f_lo, f_hi)
         delay_var = np.full(current.grid_delay.size, -1, dtype=np.int64)  # (E+1,)
         delay_var[events] = new_vars(model, events.size, 0, fleet.horizon)
-        delays = Delays(delay_var, current.grid_delay)  # held robots' delays stay known
+        # Held robots' delays stay known; a picked robot passing one first may delay it
+        # up to its latest.
+        delays = Delays(delay_var, current.grid_delay, current.grid_latest)
         self.em = ExactModel(
             model,
             a_lit[self.conflicts],

@@ -422,7 +422,7 @@ class _Incumbent:
     ) -> _Incumbent:
         """``answer`` with its evaluation and a topological order ``pos`` (V,) of its node
         graph (re-ranked to 0..V-1: repairs split gaps, which would shrink without end);
-        ``weight`` (E+1,) as :func:`_objective_weight`."""
+        ``weight`` (E+1,) as :meth:`~service.core.evaluate.Evaluator.objective_weights`."""
         return cls(
             answer.a_first[0],
             answer.following[0],
@@ -436,19 +436,6 @@ class _Incumbent:
         )
 
 
-def _objective_weight(ctx: SolveContext) -> np.ndarray:
-    """(E+1,) weight of each event's delay in a robot's part of the objective: its last
-    event's for avg_completion (completion = free time + that delay), the evaluator's
-    for avg_delay."""
-    graph = ctx.evaluator.graph
-    if ctx.objective == "avg_delay":
-        return graph.delay_weight.copy()
-    weight = np.zeros(graph.delay_weight.size)
-    weight[graph.last_event] = 1.0
-    weight[-1] = 0.0  # robots with no event
-    return weight
-
-
 def reinsert_search(
     ctx: SolveContext,
     start: Assignments,
@@ -460,7 +447,7 @@ def reinsert_search(
     """Re-insertion LNS from the valid ``start`` until ``deadline`` (monotonic) or
     ``max_steps`` steps (None: no cap), whichever comes first, or until no robot waits."""
     st = _Static.of(ctx)
-    weight = _objective_weight(ctx)
+    weight = ctx.evaluator.objective_weights(ctx.objective)
     budget = ctx.cliques.budget.astype(np.int64)
     rng = np.random.default_rng(seed)
     rank = ctx.orientation.topological_rank(start.a_first[0])
@@ -508,7 +495,7 @@ def planned_start(
     rng = np.random.default_rng(seed)
     every = np.arange(p.n_robots)
     fixed = _fixed_between(_Static.of(ctx), every, np.ones(p.n_conflicts, dtype=bool))
-    weight = _objective_weight(ctx)
+    weight = ctx.evaluator.objective_weights(ctx.objective)
     found = None
     for k in range(orders):
         if k and time.monotonic() >= until:
@@ -538,7 +525,7 @@ def _plan(
     arcs ``fixed`` of :func:`_fixed_between` over the whole fleet) moved ahead of it
     (:func:`_fixed_first`), each on its passage past those placed before it (None: some
     robot had none, against fixed directions); ``weight`` (E+1,) as
-    :func:`_objective_weight`."""
+    :meth:`~service.core.evaluate.Evaluator.objective_weights`."""
     p, st = ctx.problem, _Static.of(ctx)
     following = p.fixed_type == 1  # (M,) realized types stay, and take their room
     room = ctx.cliques.budget.astype(np.int64) - ctx.cliques.following_counts(following[None])[0]

@@ -448,6 +448,29 @@ def test_latest_delays_refuse_a_cycle() -> None:
         ev.latest_delays(cyclic, ev.evaluate(cyclic), np.ones(ev.n_events + 1, dtype=bool))
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_objective_weights_sum_the_objectives(seed: int) -> None:
+    """The event delays weighted by them give avg_delay, and avg_completion less the free
+    cost times the robots; a maximum or the synchronised mean has none."""
+    problem = _problem(stitched_problem(seed, 12, 3.0) if seed % 2 else small_problem(seed))
+    ev = Evaluator(problem)
+    batch = _random_batch(problem, seed, 8)
+    result = ev.evaluate(batch)
+    ok = result.converged
+    delay = result.event_delay[ok]  # (S, E+1)
+    np.testing.assert_allclose(
+        delay @ ev.objective_weights("avg_delay"), result.costs["avg_delay"][ok]
+    )
+    free = ev.free_costs()["avg_completion"]
+    np.testing.assert_allclose(
+        delay @ ev.objective_weights("avg_completion") / problem.n_robots + free,
+        result.costs["avg_completion"][ok],
+    )
+    for objective in ("max_completion", "sync_completion"):
+        with pytest.raises(ValueError, match="sum"):
+            ev.objective_weights(objective)
+
+
 def test_an_empty_batch_has_empty_results() -> None:
     problem = _problem(small_problem(3))
     empty = np.zeros((0, problem.n_conflicts), dtype=bool)

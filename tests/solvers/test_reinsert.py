@@ -64,7 +64,9 @@ def _incumbent(ctx: SolveContext) -> reinsert._Incumbent:
     rank = ctx.orientation.topological_rank(start.a_first[0])
     assert rank is not None
     evaluation = ctx.evaluator.evaluate(start)
-    return reinsert._Incumbent.of(ctx, start, evaluation, rank, reinsert._objective_weight(ctx))
+    return reinsert._Incumbent.of(
+        ctx, start, evaluation, rank, ctx.evaluator.objective_weights(ctx.objective)
+    )
 
 
 @settings(max_examples=60, deadline=None, derandomize=True, suppress_health_check=SLOW)
@@ -99,7 +101,7 @@ def test_every_repair_is_valid_and_its_times_are_a_schedule_of_it(
     a_first, following = current.a_first.copy(), current.following & ~freed
     delay, pos = current.delay.copy(), current.pos.copy()
     latest = current.latest.copy() if slack else current.delay.copy()
-    weight = reinsert._objective_weight(ctx)
+    weight = ctx.evaluator.objective_weights(ctx.objective)
     cost = reinsert._repair(order, static, delay, latest, pos, room, a_first, following, weight)
     if not np.isfinite(cost):  # only where fixed directions leave a robot no passage
         assert problem.has_forced
@@ -152,7 +154,7 @@ def test_a_lone_robot_never_finishes_later_than_it_did(family: str, seed: int, r
         return
     static = reinsert._Static.of(ctx)
     current = _incumbent(ctx)
-    weight = reinsert._objective_weight(ctx)
+    weight = ctx.evaluator.objective_weights(ctx.objective)
     for robot in range(problem.n_robots):
         order = np.array([robot])
         freed = reinsert._freed(static, order, problem.n_conflicts)
@@ -259,7 +261,7 @@ def test_a_plan_of_the_whole_fleet_is_valid_and_its_first_robot_never_waits(
     static = reinsert._Static.of(ctx)
     freed = np.ones(problem.n_conflicts, dtype=bool)
     fixed = reinsert._fixed_between(static, np.arange(problem.n_robots), freed)
-    plan = reinsert._plan(ctx, order, fixed, reinsert._objective_weight(ctx))
+    plan = reinsert._plan(ctx, order, fixed, ctx.evaluator.objective_weights(ctx.objective))
     if plan is None:  # only where fixed directions leave a robot no passage
         assert problem.has_forced
         return
