@@ -134,8 +134,9 @@ class JsonCache:
 # first stage is robot-priority search, session 12; its 10-s answers on 100-250-robot
 # warehouses cost 15-40 % less than the old references; 3: session 24, LNS after priority
 # search at 250 robots and its wider step, whose 10-s answers there cost 10-28 % less than
-# the r2 references).
-REFERENCE_VERSION = 3
+# the r2 references; 4: session 27, re-insertion and LNS delay held robots up to their
+# latest delays, whose 5-s answers on 100-250-robot warehouses cost less than r3).
+REFERENCE_VERSION = 4
 
 
 def reference_cache(directory: Path, name: str) -> JsonCache:
