@@ -378,15 +378,20 @@ def test_least_times_equal_brute_force(seed: int) -> None:
             assert result.costs[k][s] == pytest.approx(want[k], rel=1e-12, abs=1e-9)
 
 
+def _decoded(problem: Problem, seed: int) -> Assignments:
+    """A valid (acyclic) assignment: random priorities and type scores decoded."""
+    rng = np.random.default_rng(seed)
+    return Decoder(problem, find_cliques(problem)).decode(
+        rng.exponential(size=(1, problem.n_nodes)) + 1e-3, rng.random((1, problem.n_conflicts))
+    )
+
+
 @pytest.mark.parametrize("seed", range(6))
 def test_only_binding_conflicts_hold_robots_back(seed: int) -> None:
     """Dropping a conflict that is not binding changes no completion time; some bind."""
     request = stitched_problem(seed, 12, 3.0)
     problem = _problem(request)
-    rng = np.random.default_rng(seed)
-    assignment = Decoder(problem, find_cliques(problem)).decode(
-        rng.exponential(size=(1, problem.n_nodes)) + 1e-3, rng.random((1, problem.n_conflicts))
-    )
+    assignment = _decoded(problem, seed)
     ev = Evaluator(problem)
     evaluation = ev.evaluate(assignment)
     binding = ev.binding(assignment, evaluation)
@@ -419,9 +424,7 @@ def test_latest_delays_are_the_latest_that_keep_the_held_events(seed: int, stitc
     request = stitched_problem(seed, 10, 3.0) if stitched else small_problem(seed)
     problem = _problem(request)
     rng = np.random.default_rng(seed)
-    assignment = Decoder(problem, find_cliques(problem)).decode(
-        rng.exponential(size=(1, problem.n_nodes)) + 1e-3, rng.random((1, problem.n_conflicts))
-    )
+    assignment = _decoded(problem, seed)
     ev = Evaluator(problem)
     evaluation = ev.evaluate(assignment)
     least = evaluation.event_delay[0]  # (E+1,)
