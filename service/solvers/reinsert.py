@@ -37,10 +37,10 @@ some). Delays up to the latest never add up to more (a schedule below the latest
 below it), so the held robots' part stays; the picked robots' part is exact unless a
 robot pushed a held partner that it (or another picked robot) waits for further on,
 which then releases it later than planned: the exact evaluation that decides counts
-that. Objectives: the sums, as
-:mod:`service.solvers.lns` (avg_completion, avg_delay; for avg_delay every event is in
-the objective, so no event has room); a passage minimises its robot's last delay, which
-for avg_delay is a proxy that the evaluation corrects. Deterministic for a seed.
+that. Objectives: the sums, as :mod:`service.solvers.lns` (avg_completion, avg_delay;
+for avg_delay every event is in the objective, so no event has room); a passage
+minimises its robot's last delay, which for avg_delay is a proxy that the evaluation
+corrects. Deterministic for a seed.
 
 **A plan** (:func:`planned_start`) is the same repair of the whole fleet from no robot
 placed: prioritized planning in one order, each robot on its exact passage past those
