@@ -156,6 +156,7 @@ class _Fleet:
     ti: np.ndarray  # (P,) int64 times on CP-SAT's grid
     horizon: int
     grid: Evaluator  # least delays of the grid-rounded problem
+    held: np.ndarray  # (E+1,) bool events in the objective: their delays bound the latest
     delay_weight: np.ndarray  # (E,) int weight of each event's delay in avg_delay
     binding: np.ndarray  # (Q,) bool cliques whose budget can bind
     domains: tuple[np.ndarray, ...]  # (M,) each: literal_domains' a_lo, a_hi, f_lo, f_hi
@@ -186,6 +187,7 @@ class _Fleet:
             ti,
             horizon,
             grid,
+            grid.objective_weights(ctx.objective) > 0,
             delay_weights(p),
             ctx.cliques.binding(),
             literal_domains(p, ctx.cliques.forbidden()),
@@ -255,8 +257,7 @@ class _Incumbent:
         a_first, following = answer.a_first[0], answer.following[0]
         on_grid = fleet.grid.evaluate(answer)
         grid = np.rint(on_grid.event_delay[0] * fleet.scale).astype(np.int64)
-        held = fleet.grid.objective_weights(ctx.objective) > 0
-        latest = fleet.grid.latest_delays(answer, on_grid, held)  # (E+1,) inf: unbounded
+        latest = fleet.grid.latest_delays(answer, on_grid, fleet.held)  # (E+1,) inf: unbounded
         return cls(
             a_first,
             following,

@@ -210,7 +210,7 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
         and problem.n_conflicts > ctx.exact_max_conflicts
         and problem.n_conflicts >= ctx.lns_min_conflicts
     )
-    if reinserts and ctx.warm is None:  # a re-schedule: tabu from its previous answer, below
+    if reinserts and ctx.warm is None:  # a re-schedule starts from its previous answer (tabu)
         until = time.monotonic() + PLANNED_SHARE * (deadline - time.monotonic())
         planned = planned_start(ctx, PLANNED_ORDERS, ctx.seed, until)
         if planned is not None and planned[1] < cost:
