@@ -8,7 +8,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TypeVar
+from typing import TypeVar, get_args
 
 from anyio import CapacityLimiter, WouldBlock, to_thread
 
@@ -17,10 +17,11 @@ from service.api.request_log import RequestRecord
 from service.core.cliques import CliqueBound, TooManyCliques, clique_budget
 from service.core.path_schemas import PathsRequest
 from service.core.problem import ProblemError
-from service.core.schemas import OBJECTIVES, OptionsIn, ScheduleRequest
+from service.core.schemas import OBJECTIVES, OptionsIn, ScheduleRequest, SolverName
 from service.geometry.graph import GeometrySettings
 from service.memory import settle
-from service.motion.plan import plan_paths
+from service.motion.plan import derived_request, plan_paths
+from service.scenarios import generate
 from service.settings import Settings
 from service.solvers.dispatch import LAST_RESORT, DispatchPolicy, dispatch
 from service.solvers.registry import solver_names
@@ -34,7 +35,8 @@ __all__ = [
     "dispatch_policy",
     "load_models",
     "missing_solvers",
-    "warm_solver",
+    "stage_policies",
+    "warm_solvers",
     "warm_up",
 ]
 
@@ -54,6 +56,10 @@ WARMUP_REQUEST = ScheduleRequest.model_validate(
         "options": {"solver": "exact", "time_limit_s": 10.0},
     }
 )
+# Warms every solver and auto's large-problem stages up (:func:`warm_solvers`): a two-way
+# warehouse of 16 robots, 92 conflicts, 12 fixed directions, 3 binding density cliques.
+WARMUP_WORLD = ("wh_two_way", 16, 0)
+WARMUP_SOLVER_S = 0.05  # each solve's time limit (a cold cache compiles past it)
 # Warms the paths form up the same way: a crossing (exclusive) and a same-way pair.
 PATHS_WARMUP_REQUEST = PathsRequest.model_validate(
     {
@@ -217,11 +223,30 @@ def load_models(runtime: Runtime, store: Path) -> None:
         log.warning("no GNN-VAE for %s (exact solver serves it): %s", objective, error)
 
 
-def warm_solver(policy: DispatchPolicy, solver: str, time_limit_s: float) -> None:
-    """Solve :data:`WARMUP_REQUEST` with ``solver`` (two samples where it samples), so that
-    its compiled kernels are loaded, or compiled, before anything is timed."""
-    options = OptionsIn(solver=solver, samples=2, time_limit_s=time_limit_s)
-    dispatch(WARMUP_REQUEST.model_copy(update={"options": options}), policy)
+def stage_policies(policy: DispatchPolicy) -> list[DispatchPolicy]:
+    """``policy`` and the variants that send a small problem down each large-problem path
+    of ``auto``: first stage, LNS and CP-SAT; plans, turns and LNS; turns alone."""
+    large = replace(policy, exact_max_conflicts=0)
+    planned = replace(large, lns_min_conflicts=0)
+    return [policy, large, planned, replace(planned, exact_stage_max_conflicts=0)]
+
+
+def warm_solvers(policy: DispatchPolicy) -> None:
+    """Solve WARMUP_WORLD with every solver, ``auto`` down each of its paths
+    (:func:`stage_policies`), so that every compiled kernel a request can reach is
+    loaded (or compiled) before the service reports ready. The one-conflict
+    WARMUP_REQUEST reaches none of those that fixed directions, binding density
+    cliques and the large-problem stages need; a cold numba cache (a new container)
+    then compiled them inside the first large request: 1.7 s over a 1-s budget at 250
+    robots (session 28). ``tests/api/warm_check.py`` checks that other worlds compile
+    nothing more."""
+    request = derived_request(generate(*WARMUP_WORLD))
+    if request is None:
+        raise RuntimeError(f"the warm-up world {WARMUP_WORLD} derives no problem")
+    for solver in get_args(SolverName):
+        options = OptionsIn(solver=solver, samples=2, time_limit_s=WARMUP_SOLVER_S)
+        for staged in stage_policies(policy) if solver == "auto" else [policy]:
+            dispatch(request.model_copy(update={"options": options}), staged)
 
 
 def warm_up(runtime: Runtime) -> None:
@@ -239,12 +264,7 @@ def warm_up(runtime: Runtime) -> None:
         load_models(runtime, runtime.model_store)
     try:
         dispatch(WARMUP_REQUEST, runtime.policy)
-        # The large-problem paths too (tabu's kernels, the GNN-VAE), or their fallbacks, and
-        # last large-neighbourhood search and re-insertion search (they run to their limits:
-        # steps of milliseconds here, the first one compiling their kernels).
-        warmed = dict.fromkeys([runtime.policy.large_solver, "gnn_vae_refined"], 10.0)
-        for solver, limit_s in {**warmed, "lns": 0.5, "reinsert": 0.2}.items():
-            warm_solver(runtime.policy, solver, limit_s)
+        warm_solvers(runtime.policy)
         # The paths form: geometry, dependency plan, executor and clearance kernels.
         plan_paths(PATHS_WARMUP_REQUEST, runtime.policy, GeometrySettings())
     except Exception as exc:

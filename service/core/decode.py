@@ -249,7 +249,9 @@ class Decoder:
         """
         if not self.problem.has_forced:
             return np.atleast_2d(ranks)
-        ranks = np.atleast_2d(np.asarray(ranks, dtype=np.float64))
+        # C order: a column-indexed batch arrives in Fortran order, which compiled the
+        # kernel a second time.
+        ranks = np.ascontiguousarray(np.atleast_2d(ranks), dtype=np.float64)  # (S, V)
         graph = (self._order, self._prev, self._in_start, self._in_first)
         out = _push_forced(ranks, *graph)
         bad = ~np.all(np.isfinite(out), axis=1)  # (S,)

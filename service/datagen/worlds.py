@@ -18,16 +18,12 @@ from typing import Any
 
 import numpy as np
 
-from service.core.cliques import TooManyCliques, find_cliques
-from service.core.path_schemas import PathsRequest
-from service.core.problem import ProblemError, problem_from_request
 from service.core.schemas import ScheduleRequest
 from service.datagen.config import ScenarioConfig
-from service.geometry.graph import GeometrySettings
-from service.motion.plan import derive
-from service.scenarios import KINDS, World, generate
+from service.motion.plan import derived_request
+from service.scenarios import KINDS, generate
 
-__all__ = ["DrawnWorld", "derived_request", "draw_world", "robot_count"]
+__all__ = ["DrawnWorld", "draw_world", "robot_count"]
 
 
 @dataclass(frozen=True)
@@ -57,21 +53,6 @@ class DrawnWorld:
 def robot_count(rng: np.random.Generator, low: int, high: int) -> int:
     """A robot count in ``low..high``, log-uniform (each doubling as likely as the next)."""
     return min(high, int(math.exp(rng.uniform(math.log(low), math.log(high + 1)))))
-
-
-def derived_request(world: World) -> ScheduleRequest | None:
-    """The graph-form request of ``world``, as the service derives it; None when the
-    service would refuse the world or no two of its robots interfere."""
-    paths = PathsRequest.model_validate(world.to_request())
-    try:
-        request = derive(paths, GeometrySettings()).to_request(paths)
-        if request is None:
-            return None
-        problem = problem_from_request(request)
-        find_cliques(problem)  # raises where the service answers 413
-    except (ProblemError, TooManyCliques):
-        return None
-    return request if problem.n_conflicts else None
 
 
 def draw_world(cfg: ScenarioConfig, seed: int) -> DrawnWorld:

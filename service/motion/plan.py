@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from service.core.cliques import TooManyCliques, find_cliques
 from service.core.path_schemas import (
     CoordinationGraphResponse,
     MotionChecksOut,
@@ -26,11 +27,13 @@ from service.core.path_schemas import (
     TimingsOut,
     TrajectoryOut,
 )
+from service.core.problem import ProblemError, problem_from_request
 from service.core.schemas import (
     AssignmentOut,
     CostsOut,
     NodeTimesOut,
     RobotScheduleOut,
+    ScheduleRequest,
     ScheduleResponse,
     SolverInfoOut,
 )
@@ -39,6 +42,7 @@ from service.geometry.paths import RobotPath
 from service.motion.dependencies import Decision, dependency_plan
 from service.motion.progress import progress_at, state_of
 from service.motion.trajectories import departure_times, realized_costs, trajectories
+from service.scenarios.world import World
 from service.simulation.clearance import Clearance, Trajectory, check_clearance
 from service.simulation.executor import (
     DependencyPlan,
@@ -51,7 +55,7 @@ from service.simulation.executor import (
 from service.simulation.simulate import plan_to_wire
 from service.solvers.dispatch import DispatchPolicy, InvalidAnswerError, dispatch_problem
 
-__all__ = ["MOTION_SHARE", "coordination_graph", "plan_paths"]
+__all__ = ["MOTION_SHARE", "coordination_graph", "derived_request", "plan_paths"]
 
 log = logging.getLogger(__name__)
 
@@ -79,6 +83,21 @@ def derive(request: PathsRequest, geometry: GeometrySettings) -> CoordinationGra
         ProblemError: fixed paths leave no collision-free order.
     """
     return build_graph([RobotPath.from_wire(r) for r in request.robots], geometry)
+
+
+def derived_request(world: World) -> ScheduleRequest | None:
+    """The graph-form request of ``world``, as the service derives it; None when the
+    service would refuse the world or no two of its robots interfere."""
+    paths = PathsRequest.model_validate(world.to_request())
+    try:
+        request = derive(paths, GeometrySettings()).to_request(paths)
+        if request is None:
+            return None
+        problem = problem_from_request(request)
+        find_cliques(problem)  # raises where the service answers 413
+    except (ProblemError, TooManyCliques):
+        return None
+    return request if problem.n_conflicts else None
 
 
 def coordination_graph(

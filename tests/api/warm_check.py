@@ -1,0 +1,64 @@
+"""Run as ``python -m tests.api.warm_check``: the service's warm-up in a fresh interpreter,
+then requests it did not see; prints (JSON) every compiled-kernel signature those
+requests added, which on a cold numba cache each cost a compile of seconds inside a
+timed request. ``test_warm_up.py`` runs it and expects none."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import get_args
+
+import numba
+
+from service.api.runtime import build_runtime, stage_policies, warm_up
+from service.core.path_schemas import PathsRequest
+from service.core.schemas import OptionsIn, SolverName
+from service.geometry.graph import GeometrySettings
+from service.motion.plan import derived_request, plan_paths
+from service.scenarios import generate
+from service.settings import Settings
+from service.solvers.dispatch import dispatch
+
+MODEL_STORE = Path(__file__).resolve().parents[2] / "model_store"
+# Worlds unlike the warm-up's (kind, robots, seed), solved by every solver (auto under
+# policies that reach each of its stages) and in the paths form.
+WORLDS = (("wh_two_lane", 40, 1), ("wh_parked", 12, 1), ("floor_dense", 12, 3), ("wh_mixed", 20, 1))
+
+
+def signatures() -> dict[str, set[str]]:
+    """Every loaded numba kernel of the service -> its compiled signatures."""
+    out: dict[str, set[str]] = {}
+    for name, module in list(sys.modules.items()):
+        if name.startswith("service"):
+            for attr, value in vars(module).items():
+                if isinstance(value, numba.core.registry.CPUDispatcher):
+                    out[f"{name}.{attr}"] = {str(sig) for sig in value.signatures}
+    return out
+
+
+def main() -> int:
+    runtime = build_runtime(Settings(model_store=MODEL_STORE))
+    warm_up(runtime)
+    if not runtime.ready:
+        print(json.dumps({"not ready": runtime.detail}))
+        return 1
+    before = signatures()
+    for kind, robots, seed in WORLDS:
+        world = generate(kind, robots, seed)
+        request = derived_request(world)
+        for solver in get_args(SolverName):
+            options = OptionsIn(solver=solver, samples=4, time_limit_s=0.2)
+            for policy in stage_policies(runtime.policy) if solver == "auto" else [runtime.policy]:
+                dispatch(request.model_copy(update={"options": options}), policy)
+        paths = PathsRequest.model_validate(world.to_request())
+        plan_paths(paths, runtime.policy, GeometrySettings())
+    after = signatures()
+    added = {k: sorted(v - before.get(k, set())) for k, v in after.items()}
+    print(json.dumps({k: v for k, v in added.items() if v}))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
