@@ -197,7 +197,7 @@ def _passage(
     k, m = conflicts.size, ranks.size
     kidx = np.searchsorted(ranks, partner_pos)  # (K,) the partner passes first iff kidx < g
     # Each conflict's release (robot second) and deadline (robot first), at its type.
-    rel_e = np.empty(k, dtype=np.int64)
+    rel_e = np.empty(k, dtype=np.int64)  # events of the robot's own: 0..N-1
     rel_v = np.full(k, -np.inf)
     dl_e = np.empty(k, dtype=np.int64)
     dl_v = np.full(k, np.inf)
@@ -214,9 +214,7 @@ def _passage(
     # of node n-1 that least[g] came from on entering node n.
     least = np.zeros(m + 1)
     back = np.empty((n_nodes, m + 1), dtype=np.int64)
-    for n in range(n_nodes):
-        back[n] = np.arange(m + 1)  # nodes without events keep the gap
-    by_rel, by_dl = np.argsort(rel_e), np.argsort(dl_e)  # conflicts by event
+    by_rel, by_dl = _by_event(rel_e, ev_node.size), _by_event(dl_e, ev_node.size)
     r, t, current = 0, 0, 0
     for e in range(ev_node.size):
         while ev_node[e] > current:  # into the next node: its gap is at least the last's
@@ -233,8 +231,12 @@ def _passage(
             i = by_rel[r]
             r += 1
             lo = kidx[i] + 1  # gaps lo..m: the partner passes first
-            for g in range(lo, m + 1):
-                least[g] = np.inf if force[i] > 0 else max(least[g], rel_v[i])
+            if force[i] > 0:
+                least[lo:] = np.inf
+            else:
+                v = rel_v[i]
+                for g in range(lo, m + 1):
+                    least[g] = max(least[g], v)
             if force[i] < 0:
                 least[:lo] = np.inf
         while t < k and dl_e[by_dl[t]] == e:
@@ -243,6 +245,8 @@ def _passage(
             for g in range(kidx[i] + 1):
                 if least[g] > dl_v[i] + TOL:
                     least[g] = np.inf
+    for n in range(current + 1, n_nodes):  # nodes after the last event keep the gap
+        back[n] = np.arange(m + 1)
     best, arg = np.inf, -1
     for g in range(m + 1):
         if least[g] < best - TOL:
@@ -271,6 +275,23 @@ def _passage(
         need = d[source[0, slot]] + offset[0, slot] > d[target[slot]] + TOL
         following[i] = follow[i] and live[slot] and need
     return True
+
+
+@numba.njit(cache=True, nogil=True)
+def _by_event(event: np.ndarray, n_events: int) -> np.ndarray:
+    """(K,) indices of ``event`` (K,) int in 0..n_events-1, by event, ties in index order:
+    a counting sort (with it in place of two argsorts and without a table filled per node,
+    re-insertion steps at 250 robots ran 1.0-1.3x as fast, session 28)."""
+    start = np.zeros(n_events + 1, dtype=np.int64)
+    for e in event:
+        start[e + 1] += 1
+    for e in range(n_events):
+        start[e + 1] += start[e]
+    out = np.empty(event.size, dtype=np.int64)
+    for i in range(event.size):
+        out[start[event[i]]] = i
+        start[event[i]] += 1
+    return out
 
 
 @numba.njit(cache=True, nogil=True)
@@ -419,10 +440,14 @@ class _Incumbent:
         evaluation: Evaluation,
         pos: np.ndarray,
         weight: np.ndarray,
+        counts: np.ndarray | None = None,
     ) -> _Incumbent:
-        """``answer`` with its evaluation and a topological order ``pos`` (V,) of its node
-        graph (re-ranked to 0..V-1: repairs split gaps, which would shrink without end);
+        """``answer`` with its evaluation, a topological order ``pos`` (V,) of its node
+        graph (re-ranked to 0..V-1: repairs split gaps, which would shrink without end)
+        and its following-type ``counts`` (Q,) per clique (None: counted here);
         ``weight`` (E+1,) as :meth:`~service.core.evaluate.Evaluator.objective_weights`."""
+        if counts is None:
+            counts = ctx.cliques.following_counts(answer.following)[0]
         return cls(
             answer.a_first[0],
             answer.following[0],
@@ -430,7 +455,7 @@ class _Incumbent:
             evaluation.event_delay[0],
             ctx.evaluator.latest_delays(answer, evaluation, weight > 0),
             np.argsort(np.argsort(pos, kind="stable")).astype(np.float64),
-            ctx.cliques.following_counts(answer.following)[0],
+            counts,
             evaluation.completion[0] - ctx.problem.free_time(),
             ctx.evaluator.binding(answer, evaluation),
         )
@@ -664,10 +689,33 @@ def _cheaper(
     along = p.node_robot[1:] == p.node_robot[:-1]  # (V-1,) path arcs v -> v+1
     if (pos[tail] >= pos[head]).any() or (pos[1:][along] <= pos[:-1][along]).any():
         return None
-    incumbent = _Incumbent.of(ctx, found, evaluation, pos, weight)
-    if (incumbent.counts > ctx.cliques.budget).any():
+    orientation, following = ctx.orientation, found.following[0]
+    counts = _recount(
+        current.counts, current.following, following, orientation.cq_start, orientation.cq_clique
+    )  # (Q,)
+    if (counts > ctx.cliques.budget).any():
         return None
-    return incumbent
+    return _Incumbent.of(ctx, found, evaluation, pos, weight, counts)
+
+
+@numba.njit(cache=True, nogil=True)
+def _recount(
+    counts: np.ndarray,  # (Q,) int, following-type conflicts per clique of ``before``
+    before: np.ndarray,  # (M,) bool, following-type
+    after: np.ndarray,  # (M,) bool
+    cq_start: np.ndarray,  # (M+1,) conflict c's cliques: cq_clique[cq_start[c]:cq_start[c+1]]
+    cq_clique: np.ndarray,
+) -> np.ndarray:
+    """(Q,) following-type conflicts per clique of ``after``, from those of ``before``: a
+    step changes the types of a few robots' conflicts, and a full count
+    (:meth:`~service.core.cliques.Cliques.following_counts`) took 1.2 ms at 250 robots."""
+    out = counts.copy()
+    for c in range(before.size):
+        if before[c] != after[c]:
+            step = 1 if after[c] else -1
+            for k in range(cq_start[c], cq_start[c + 1]):
+                out[cq_clique[k]] += step
+    return out
 
 
 @register("reinsert")
