@@ -75,8 +75,9 @@ from service.solvers.registry import solver_names
 
 __all__ = ["QUICK", "SOLVERS", "Config", "WorldCase", "main", "run"]
 
-# Every registered solver and the service's default router, in registry order.
-SOLVERS = (*(n for n in solver_names() if n != "none"), "auto")
+# Every registered solver (the dispatcher registers them all, ``auto`` included), in
+# registry order. (Until session 28 ``auto`` was appended once more, and ran twice.)
+SOLVERS = tuple(n for n in solver_names() if n != "none")
 FAST_SOLVERS = ("fcfs", "gnn_vae", "gnn_vae_refined", "tabu", "auto")
 REFERENCE_SOLVER = "exact"
 FLOOR, WAREHOUSE = "floor", "warehouse"

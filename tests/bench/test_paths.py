@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from dataclasses import replace
 from pathlib import Path
+from typing import get_args
 
 import pytest
 
@@ -13,6 +14,7 @@ from bench.paths import (
     OK,
     QUICK,
     REFUSED,
+    SOLVERS,
     Config,
     WorldCase,
     _parse_args,
@@ -23,6 +25,7 @@ from bench.paths import (
     summarize,
 )
 from bench.report import config_from_args
+from service.core.schemas import SolverName
 from service.scenarios import generate
 
 
@@ -101,3 +104,8 @@ def test_quick_run_writes_everything_and_never_collides(tmp_path: Path) -> None:
     assert all(r["ratio"] <= 1.0 + 1e-9 and r["cost"] >= r["free"] - 1e-6 for r in answered)
     assert "collision free" in (out / "tables.md").read_text()
     assert main(["--quick", "--out", str(out), "--summarize"]) == 0  # re-renders from raw
+
+
+def test_every_solver_runs_once_by_default() -> None:
+    """The default run lists every solver the service has, ``auto`` among them, once."""
+    assert sorted(SOLVERS) == sorted(set(get_args(SolverName)))
