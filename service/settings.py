@@ -49,11 +49,12 @@ class Settings(BaseSettings):
     # it proves 25 robots x 2 conflicts (50) in < 0.5 s but not 25 x 4 (100) in 10 s.
     exact_max_conflicts: int = Field(default=60, ge=0)
     # ``auto`` skips its CP-SAT stage above this many conflicts and gives the first stage
-    # (then tabu search) the whole budget: measured (docs/benchmarks.md, "Anytime auto"),
-    # CP-SAT improved no 250-robot warehouse (12,000-23,000 conflicts) in 10 s, and
-    # the 70 % it took there made auto worse with 10 s than with 5 s. (Where the budget
-    # leaves it time in proportion to the conflicts per robot, LNS follows the first stage
-    # there instead: portfolio.LARGE_LNS_S_PER_CONFLICT, session 24.)
+    # (then re-insertion and priority search, or tabu search) the whole budget: measured
+    # (docs/benchmarks.md, "Anytime auto"), CP-SAT improved no 250-robot warehouse
+    # (12,000-23,000 conflicts) in 10 s, and the 70 % it took there made auto worse with
+    # 10 s than with 5 s. (Where the budget leaves it time in proportion to the conflicts
+    # per robot, LNS follows the first stage there instead: portfolio.LARGE_LNS_RULE,
+    # sessions 24 and 28.)
     exact_stage_max_conflicts: int = Field(default=10_000, ge=0)
     # ``auto`` runs large-neighbourhood search (CP-SAT re-planning a few robots at a time,
     # service/solvers/lns.py) instead of its whole-model CP-SAT stage from this many

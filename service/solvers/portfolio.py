@@ -25,7 +25,7 @@ comes first, improving in stages:
    stage: on whole models of this size one CP-SAT worker barely moves from its
    hint. Above ``exact_stage_max_conflicts`` too, from smaller neighbourhoods, where
    the budget leaves it time in proportion to the conflicts per robot (see
-   LARGE_LNS_S_PER_CONFLICT). Below ``lns_min_conflicts``, until it converges (a
+   LARGE_LNS_RULE). Below ``lns_min_conflicts``, until it converges (a
    plateau at its largest neighbourhood), proves optimality (a step that freed every
    robot of a fleet of at most ``lns.MAX_ROBOTS``, proven by CP-SAT) or MID_LNS_SHARE
    of the time left has passed, then
@@ -87,7 +87,7 @@ MIN_POLISH_S = 0.02
 EXACT_TIME_PER_BUILD = 4
 # Above ``exact_stage_max_conflicts`` (the 250-robot warehouses: 11,000-23,000 conflicts)
 # LNS follows the first stage where the time left after it is at least
-# LARGE_LNS_S_PER_CONFLICT seconds per conflict a robot has on average (each conflict
+# LARGE_LNS_RULE's seconds per conflict a robot has on average (each conflict
 # counted for both robots), its first neighbourhoods of LARGE_LNS_ROBOTS robots: a step
 # frees about that many conflicts per robot it re-plans (~90-180 there, ~40-80 at 100
 # robots), so it costs in proportion, and LNS needs a few dozen steps to pass priority
@@ -101,7 +101,7 @@ EXACT_TIME_PER_BUILD = 4
 # two wh_mixed worlds of 91-94 per robot 0.952 -> 0.987, the six of 166-185 (wh_one_way,
 # wh_parked, wh_mixed) 0.976 -> 0.955. So LNS from ~2.1-3.5 s left at ~95 per robot and
 # from 3.5-7 s at ~175: 0.03 s per conflict per robot (2.9 and 5.3 s; budgets of 4.1 and
-# 7.5 s), and never with less than LARGE_LNS_MIN_S left (with 2.1 s it broke even at
+# 7.5 s), and never with less than a least time left (with 2.1 s it broke even at
 # best; sparser fleets than these were not measured). Session 26, with re-insertion and
 # priority search in turns after the first stage (through the dispatcher, three worlds per
 # family): two-lane 250 at 5 s (3.5 s left, LNS paid by the old rule) turns then LNS
@@ -115,9 +115,11 @@ EXACT_TIME_PER_BUILD = 4
 # wh_mixed (two worlds) 1.011-1.056, wh_one_way 1.003-1.034, wh_parked/250/37 1.014-1.082,
 # wh_parked/250/21 0.901-0.919 (LNS worse there, where no plan was found). At 3 s (2.1 s
 # left) on the two-lane ones 0.851 -> 0.856 (even). So LNS from 3 s left, 0.015 s per
-# conflict per robot (2.6 s at ~175): budgets from 4.3 s at 250 robots.
-LARGE_LNS_S_PER_CONFLICT = 0.015
-LARGE_LNS_MIN_S = 3.0
+# conflict per robot (2.6 s at ~175): budgets from 4.3 s at 250 robots. Not for
+# avg_delay, where every event is in the objective and no held robot has room: the same
+# six worlds at 5 s, LNS's cost 1.034x the turns' (worse in 10 of 12 runs); it keeps
+# session 26's rule. Per objective: (s per conflict per robot, least s) left.
+LARGE_LNS_RULE = {"avg_completion": (0.015, 3.0), "avg_delay": (0.03, 4.0)}
 LARGE_LNS_ROBOTS = 4
 # Share of the time after the first stage that LNS may take, below lns_min_conflicts,
 # before the CP-SAT stage (which proves optimality where it can): LNS stops sooner when
@@ -291,13 +293,14 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
 
 def _lns_pays_above_cap(ctx: SolveContext, deadline: float) -> bool:
     """Whether LNS follows the first stage of a problem above ``exact_stage_max_conflicts``
-    (``deadline`` monotonic): where the time left after the first stage is at least
-    LARGE_LNS_S_PER_CONFLICT seconds per conflict a robot has on average, and at least
-    LARGE_LNS_MIN_S."""
+    (``deadline`` monotonic; the objective one of LNS_OBJECTIVES): where the time left
+    after the first stage is at least LARGE_LNS_RULE's seconds per conflict a robot has
+    on average, and at least its least seconds."""
     problem = ctx.problem
+    per_conflict, least = LARGE_LNS_RULE[ctx.objective]
     per_robot = 2 * problem.n_conflicts / problem.n_robots
     left = (1 - FIRST_STAGE_SHARE) * (deadline - time.monotonic())
-    return left >= max(LARGE_LNS_MIN_S, LARGE_LNS_S_PER_CONFLICT * per_robot)
+    return left >= max(least, per_conflict * per_robot)
 
 
 def _polish(

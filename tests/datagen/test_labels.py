@@ -14,8 +14,8 @@ from service.core.evaluate import Evaluator
 from service.core.problem import problem_from_request
 from service.core.schemas import ScheduleRequest
 from service.datagen.labels import HINT_ABOVE_CONFLICTS, contexts, portfolio_hint, portfolio_labels
-from service.motion.plan import derived_request
 from service.learning.data import iter_problems
+from service.motion.plan import derived_request
 from service.scenarios import generate
 from service.solvers.tabu import plain_start
 

@@ -148,9 +148,9 @@ def test_above_its_cap_auto_runs_lns_where_time_allows_for_the_density(
 ) -> None:
     """Above exact_stage_max_conflicts LNS follows the first stage, with its large-problem
     neighbourhoods, only where the time left after the first stage (0.7 s of 1 s) is at
-    least LARGE_LNS_S_PER_CONFLICT per conflict a robot has (wh_25/0: 7.0, so 0.35 s and
-    1.4 s; the floor LARGE_LNS_MIN_S lowered to 0.1 s); else the first stage and tabu search
-    keep the budget, as before."""
+    least LARGE_LNS_RULE's seconds per conflict a robot has (wh_25/0: 7.0, so 0.35 s and
+    1.4 s; its floor lowered to 0.1 s); else the first stage and tabu search keep the
+    budget, as before."""
     import service.solvers.portfolio as portfolio
 
     sizes: list[int] = []
@@ -160,8 +160,7 @@ def test_above_its_cap_auto_runs_lns_where_time_allows_for_the_density(
         return lns.lns_search(*args, **kwargs)
 
     monkeypatch.setattr(portfolio, "lns_search", lns_search)
-    monkeypatch.setattr(portfolio, "LARGE_LNS_S_PER_CONFLICT", per_conflict)
-    monkeypatch.setattr(portfolio, "LARGE_LNS_MIN_S", 0.1)
+    monkeypatch.setattr(portfolio, "LARGE_LNS_RULE", {"avg_completion": (per_conflict, 0.1)})
     line = json.loads((DATA / "wh_25.jsonl").read_text().splitlines()[0])
     body = {**line["request"], "options": {"solver": "auto", "time_limit_s": 1.0}}
     policy = DispatchPolicy(exact_max_conflicts=0, exact_stage_max_conflicts=10)
