@@ -35,7 +35,7 @@ __all__ = [
     "dispatch_policy",
     "load_models",
     "missing_solvers",
-    "stage_policies",
+    "solve_every_way",
     "warm_solvers",
     "warm_up",
 ]
@@ -243,8 +243,14 @@ def warm_solvers(policy: DispatchPolicy) -> None:
     request = derived_request(generate(*WARMUP_WORLD))
     if request is None:
         raise RuntimeError(f"the warm-up world {WARMUP_WORLD} derives no problem")
+    solve_every_way(request, policy, WARMUP_SOLVER_S)
+
+
+def solve_every_way(request: ScheduleRequest, policy: DispatchPolicy, time_limit_s: float) -> None:
+    """``request`` solved by every solver (two samples where it samples) with
+    ``time_limit_s``, ``auto`` down each of its paths (:func:`stage_policies`)."""
     for solver in get_args(SolverName):
-        options = OptionsIn(solver=solver, samples=2, time_limit_s=WARMUP_SOLVER_S)
+        options = OptionsIn(solver=solver, samples=2, time_limit_s=time_limit_s)
         for staged in stage_policies(policy) if solver == "auto" else [policy]:
             dispatch(request.model_copy(update={"options": options}), staged)
 

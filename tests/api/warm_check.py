@@ -8,18 +8,15 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
-from typing import get_args
 
 import numba
 
-from service.api.runtime import build_runtime, stage_policies, warm_up
+from service.api.runtime import build_runtime, solve_every_way, warm_up
 from service.core.path_schemas import PathsRequest
-from service.core.schemas import OptionsIn, SolverName
 from service.geometry.graph import GeometrySettings
 from service.motion.plan import derived_request, plan_paths
 from service.scenarios import generate
 from service.settings import Settings
-from service.solvers.dispatch import dispatch
 
 MODEL_STORE = Path(__file__).resolve().parents[2] / "model_store"
 # Worlds unlike the warm-up's (kind, robots, seed), solved by every solver (auto under
@@ -47,11 +44,7 @@ def main() -> int:
     before = signatures()
     for kind, robots, seed in WORLDS:
         world = generate(kind, robots, seed)
-        request = derived_request(world)
-        for solver in get_args(SolverName):
-            options = OptionsIn(solver=solver, samples=4, time_limit_s=0.2)
-            for policy in stage_policies(runtime.policy) if solver == "auto" else [runtime.policy]:
-                dispatch(request.model_copy(update={"options": options}), policy)
+        solve_every_way(derived_request(world), runtime.policy, 0.2)
         paths = PathsRequest.model_validate(world.to_request())
         plan_paths(paths, runtime.policy, GeometrySettings())
     after = signatures()
