@@ -395,6 +395,13 @@ class OrientationGraph:
             p.conf_a.astype(np.int64), p.conf_b.astype(np.int64),
         )  # fmt: skip
 
+    def recount(self, counts: np.ndarray, before: np.ndarray, after: np.ndarray) -> np.ndarray:
+        """(Q,) following-type conflicts per clique of the types ``after`` (M,) bool, from
+        the ``counts`` (Q,) of ``before`` (M,) bool: a search step changes the types of a
+        few robots' conflicts, and a full count
+        (:meth:`~service.core.cliques.Cliques.following_counts`) takes 1.2 ms at 250 robots."""
+        return _recount(counts, before, after, self.cq_start, self.cq_clique)
+
     def count_type_move(self, counts: np.ndarray, conflict: int, now_following: bool) -> None:
         """Update ``counts`` (Q,) in place for ``conflict`` having turned following-type (or
         exclusive, if not ``now_following``)."""
@@ -427,3 +434,21 @@ class OrientationGraph:
 def _fixed_orientation(problem: Problem) -> np.ndarray:
     """(M,) int8 orientation of the fixed conflicts (1 a->b, 0 b->a), UNSET elsewhere."""
     return np.where(problem.forced == 0, UNSET, problem.forced > 0).astype(np.int8)
+
+
+@numba.njit(cache=True, nogil=True)
+def _recount(
+    counts: np.ndarray,  # (Q,) int, following-type conflicts per clique of ``before``
+    before: np.ndarray,  # (M,) bool, following-type
+    after: np.ndarray,  # (M,) bool
+    cq_start: np.ndarray,  # (M+1,) conflict c's cliques: cq_clique[cq_start[c]:cq_start[c+1]]
+    cq_clique: np.ndarray,
+) -> np.ndarray:
+    """(Q,) following-type conflicts per clique of ``after``, from those of ``before``."""
+    out = counts.copy()
+    for c in range(before.size):
+        if before[c] != after[c]:
+            step = 1 if after[c] else -1
+            for k in range(cq_start[c], cq_start[c + 1]):
+                out[cq_clique[k]] += step
+    return out

@@ -252,9 +252,13 @@ class _Incumbent:
         answer: Assignments,
         rank: np.ndarray,
         evaluation: Evaluation,
+        counts: np.ndarray | None = None,
     ) -> _Incumbent:
-        """``answer`` with its topological rank and its evaluation (both already found)."""
+        """``answer`` with its topological rank, its evaluation and its following-type
+        ``counts`` (Q,) per clique (all already found; None: counted here)."""
         a_first, following = answer.a_first[0], answer.following[0]
+        if counts is None:
+            counts = ctx.cliques.following_counts(following[None])[0]
         on_grid = fleet.grid.evaluate(answer)
         grid = np.rint(on_grid.event_delay[0] * fleet.scale).astype(np.int64)
         latest = fleet.grid.latest_delays(answer, on_grid, fleet.held)  # (E+1,) inf: unbounded
@@ -266,7 +270,7 @@ class _Incumbent:
             grid,
             np.rint(np.minimum(latest * fleet.scale, fleet.horizon)).astype(np.int64),
             rank,
-            ctx.cliques.following_counts(following[None])[0],
+            counts,
             _binding_waits(fleet, a_first, following, grid),
         )
 
@@ -362,7 +366,11 @@ class _Neighbourhood:
         boundary = np.zeros(p.n_nodes, dtype=bool)
         boundary[ends[~picked_node[ends]]] = True
         tails, heads = _held_reach(
-            np.flatnonzero(boundary), boundary, picked_node, *graph.walk_args(current.a_first)
+            np.flatnonzero(boundary),
+            boundary,
+            picked_node,
+            current.rank,
+            *graph.walk_args(current.a_first),
         )
         nodes = np.flatnonzero(boundary | picked_node)  # (N,)
         pos = np.full(p.n_nodes, -1, dtype=np.int64)  # (V,) position variables, -1: none
@@ -422,6 +430,7 @@ def _held_reach(
     starts: np.ndarray,
     boundary: np.ndarray,
     picked: np.ndarray,
+    rank: np.ndarray,
     orient: np.ndarray,
     succ: np.ndarray,
     inc_start: np.ndarray,
@@ -429,44 +438,44 @@ def _held_reach(
     conf_a: np.ndarray,
     conf_b: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Arcs (tails (K,), heads (K,)) from each boundary node in ``starts`` to the boundary
-    nodes it reaches through held nodes only (path arcs and conflicts oriented by
+    """Arcs (tails (K,), heads (K,)) from each boundary node in ``starts`` (S,) to the
+    boundary nodes it reaches through held nodes only (path arcs and conflicts oriented by
     ``orient``, never into a picked node), stopping at the first boundary node on each way.
+
+    One sweep against ``rank`` (V,), a topological order of the held graph: a node's set
+    (a bitset over ``starts``) is its held successors, each a boundary node itself or,
+    if not, its set. A depth-first search from each start instead took 12 ms a step on
+    250-robot warehouses (150 starts, ~90 conflicts a node), an eighth of the step.
 
     Shapes: boundary, picked (V,) bool; orient (M,) int8 (1: a -> b).
     """
     n_nodes = succ.size
-    stamp = np.full(n_nodes, -1, dtype=np.int64)
-    stack = np.empty(n_nodes, dtype=np.int64)
+    index = np.full(n_nodes, -1, dtype=np.int64)  # (V,) each start's bit
+    index[starts] = np.arange(starts.size)
+    reach = np.zeros((n_nodes, (starts.size + 63) // 64), dtype=np.uint64)  # (V, words)
+    for v in np.argsort(rank)[::-1]:  # successors first
+        if picked[v]:
+            continue
+        for k in range(inc_start[v] - 1, inc_start[v + 1]):  # the path's arc, then conflicts
+            w = succ[v] if k < inc_start[v] else _leads_to(inc_conf[k], v, orient, conf_a, conf_b)
+            if w < 0 or picked[w]:
+                continue
+            if boundary[w]:
+                reach[v, index[w] // 64] |= np.uint64(1) << np.uint64(index[w] % 64)
+            else:
+                for j in range(reach.shape[1]):
+                    reach[v, j] |= reach[w, j]
     tails = np.empty(16, dtype=np.int64)
     heads = np.empty(16, dtype=np.int64)
     count = 0
-    for i in range(starts.size):
-        top = 0
-        stack[top] = starts[i]
-        top += 1
-        stamp[starts[i]] = i
-        while top > 0:
-            top -= 1
-            v = stack[top]
-            for k in range(inc_start[v] - 1, inc_start[v + 1]):  # the path's arc, then conflicts
-                if k < inc_start[v]:
-                    w = succ[v]
-                else:
-                    w = _leads_to(inc_conf[k], v, orient, conf_a, conf_b)
-                if w < 0 or picked[w] or stamp[w] == i:
-                    continue
-                stamp[w] = i
-                if boundary[w]:
-                    if count == tails.size:
-                        tails = np.concatenate((tails, np.empty(count, dtype=np.int64)))
-                        heads = np.concatenate((heads, np.empty(count, dtype=np.int64)))
-                    tails[count] = starts[i]
-                    heads[count] = w
-                    count += 1
-                else:
-                    stack[top] = w
-                    top += 1
+    for u in starts:
+        for j in range(starts.size):
+            if reach[u, j // 64] >> np.uint64(j % 64) & np.uint64(1):
+                if count == tails.size:
+                    tails = np.concatenate((tails, np.empty(count, dtype=np.int64)))
+                    heads = np.concatenate((heads, np.empty(count, dtype=np.int64)))
+                tails[count], heads[count] = u, starts[j]
+                count += 1
     return _without_shortcuts(starts, tails[:count], heads[:count], n_nodes)
 
 
@@ -623,13 +632,14 @@ def _cheaper(
     rank = ctx.orientation.topological_rank(found.a_first[0])
     if rank is None:
         return None
-    if (ctx.cliques.following_counts(found.following)[0] > ctx.cliques.budget).any():
+    counts = ctx.orientation.recount(current.counts, current.following, found.following[0])
+    if (counts > ctx.cliques.budget).any():
         return None
     evaluation = ctx.evaluator.evaluate(found)
     cost = float(evaluation.costs[ctx.objective][0])
     if cost > current.cost or (cost == current.cost and not ties):
         return None
-    return _Incumbent.of(ctx, fleet, found, rank, evaluation)
+    return _Incumbent.of(ctx, fleet, found, rank, evaluation, counts)
 
 
 @register("lns")

@@ -113,3 +113,17 @@ def test_counts_kept_move_by_move_equal_a_fresh_count() -> None:
             flips += 1
     assert flips > 50
     assert counts.tolist() == graph.cliques.following_counts(following[None])[0].tolist()
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_counts_carried_to_other_types_equal_a_fresh_count(seed: int) -> None:
+    """The searches carry clique counts from one answer to the next (``recount``): from
+    any types to any others they equal a fresh count of the others."""
+    graph = _graph(stitched_problem(seed, 40, 4.0))
+    rng = np.random.default_rng(seed)
+    before, after = rng.random((2, graph.problem.n_conflicts)) < 0.5  # (M,) each
+    after[: graph.problem.n_conflicts // 2] = before[: graph.problem.n_conflicts // 2]
+    counts = graph.cliques.following_counts(before[None])[0]
+    carried = graph.recount(counts, before, after)
+    assert carried.tolist() == graph.cliques.following_counts(after[None])[0].tolist()
+    assert counts.tolist() == graph.cliques.following_counts(before[None])[0].tolist()  # kept

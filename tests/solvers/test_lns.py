@@ -9,6 +9,7 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
+import networkx as nx
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -27,6 +28,7 @@ from tests.reference import feasible_assignments, reference_problem, tiny_reques
 from tests.worlds import world_request
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "conformance"
+SLOW = [HealthCheck.too_slow]
 
 
 def _conformance(name: str, index: int = 0) -> dict:
@@ -74,6 +76,57 @@ def _request(family: str, seed: int, robots: int) -> dict:
         return stitched_problem(seed, robots, 3.0)
     names = ["wh_25", "wh_50", "geo_dense_25"]
     return _conformance(names[seed % 3], seed % 4)["request"]
+
+
+@settings(max_examples=60, deadline=None, derandomize=True, suppress_health_check=SLOW)
+@given(
+    family=st.sampled_from(["tiny", "small", "stitched", "conformance"]),
+    seed=st.integers(0, 10_000),
+    robots=st.integers(3, 30),
+    picked=st.integers(1, 6),
+)
+def test_the_held_graph_links_each_boundary_node_to_the_first_ones_it_reaches(
+    family: str, seed: int, robots: int, picked: int
+) -> None:
+    """The one sweep over a topological order links each boundary node to exactly the
+    boundary nodes a search through held nodes meets first on each way (networkx on the
+    held graph), less the arcs two others imply."""
+    ctx = _context(_request(family, seed, robots), "avg_completion")
+    problem = ctx.problem
+    if problem.n_conflicts == 0:
+        return
+    a_first = plain_start(ctx).a_first[0]
+    rank = ctx.orientation.topological_rank(a_first)
+    rng = np.random.default_rng(seed)
+    robots_picked = rng.choice(problem.n_robots, size=min(picked, problem.n_robots), replace=False)
+    picked_node = np.isin(problem.node_robot, robots_picked)  # (V,)
+    boundary = ~picked_node & (rng.random(problem.n_nodes) < 0.5)
+    starts = np.flatnonzero(boundary)
+    walk = ctx.orientation.walk_args(a_first)
+    tails, heads = lns._held_reach(starts, boundary, picked_node, rank, *walk)
+    held = nx.DiGraph()
+    held.add_nodes_from(np.flatnonzero(~picked_node).tolist())
+    along = problem.node_robot[1:] == problem.node_robot[:-1]
+    arcs = [(v, v + 1) for v in np.flatnonzero(along).tolist()]
+    tails_now = np.where(a_first, problem.conf_a, problem.conf_b)  # (M,) passing first
+    heads_now = np.where(a_first, problem.conf_b, problem.conf_a)
+    arcs += list(zip(tails_now.tolist(), heads_now.tolist(), strict=True))
+    held.add_edges_from((u, v) for u, v in arcs if not picked_node[u] and not picked_node[v])
+    expected_tails, expected_heads = [], []
+    for u in starts.tolist():
+        inner = held.subgraph([v for v in held if not boundary[v]] + [u])
+        met = set()
+        for v in nx.descendants(inner, u) | {u}:
+            met |= {w for w in held.successors(v) if boundary[w]}
+        expected_tails += [u] * len(met)
+        expected_heads += sorted(met)
+    pruned = lns._without_shortcuts(
+        starts, np.array(expected_tails, dtype=np.int64), np.array(expected_heads, dtype=np.int64),
+        problem.n_nodes,
+    )  # fmt: skip
+    assert sorted(zip(tails.tolist(), heads.tolist(), strict=True)) == sorted(
+        zip(pruned[0].tolist(), pruned[1].tolist(), strict=True)
+    )
 
 
 @settings(

@@ -287,15 +287,3 @@ def test_conflicts_are_taken_by_event_in_a_stable_order(events: list[int]) -> No
     event = np.array(events, dtype=np.int64)
     expected = np.argsort(event, kind="stable")
     assert reinsert._by_event(event, 10).tolist() == expected.tolist()
-
-
-@settings(max_examples=40, deadline=None, derandomize=True, suppress_health_check=SLOW)
-@given(ctx=CONTEXTS, seed=st.integers(0, 1000))
-def test_clique_counts_follow_a_change_of_types(ctx: SolveContext, seed: int) -> None:
-    """Counts carried from one answer to another (``_recount``) are the counts of the other."""
-    rng = np.random.default_rng(seed)
-    before, after = rng.random((2, ctx.problem.n_conflicts)) < 0.5  # (M,) each
-    counts = ctx.cliques.following_counts(before[None])[0]
-    orientation = ctx.orientation
-    carried = reinsert._recount(counts, before, after, orientation.cq_start, orientation.cq_clique)
-    assert carried.tolist() == ctx.cliques.following_counts(after[None])[0].tolist()
