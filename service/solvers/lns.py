@@ -385,19 +385,26 @@ class _Neighbourhood:
     def _budgets(
         self, ctx: SolveContext, fleet: _Fleet, current: _Incumbent, f_lit: np.ndarray
     ) -> None:
-        """At most what its held conflicts leave of each binding clique's budget."""
+        """At most what its held conflicts leave of each binding clique's budget, where
+        more of its freed conflicts may be following-type than that: on two-lane
+        warehouses of 250 robots two thirds of the cliques a step touches (half the terms)
+        have room for all of them."""
         cliques, graph = ctx.cliques, ctx.orientation
         clique, conflict = gather(graph.cq_start, graph.cq_clique, self.conflicts)  # (N,) pairs
-        binding = fleet.binding[clique]  # others: forbidden (see literal_domains) or never binding
-        order = np.argsort(clique[binding], kind="stable")
-        clique, conflict = clique[binding][order], conflict[binding][order]
+        # Others: forbidden (see literal_domains), never binding, or never following-type.
+        kept = fleet.binding[clique] & (fleet.domains[3][conflict] > 0)
+        order = np.argsort(clique[kept], kind="stable")
+        clique, conflict = clique[kept][order], conflict[kept][order]
         touched, first = np.unique(clique, return_index=True)  # (T,)
         if touched.size == 0:
             return
+        sizes = np.diff(np.append(first, conflict.size))  # (T,)
         freed_following = np.add.reduceat(current.following[conflict].astype(np.int64), first)
         room = cliques.budget[touched] - (current.counts[touched] - freed_following)  # (T,)
-        start = np.append(first, conflict.size)  # (T+1,)
-        add_sums(self.em.model, start, f_lit[conflict], INT64_MIN, room)
+        tight = room < sizes  # (T,) room for fewer than all
+        start = np.append(0, np.cumsum(sizes[tight]))  # (T'+1,)
+        terms = conflict[np.repeat(tight, sizes)]
+        add_sums(self.em.model, start, f_lit[terms], INT64_MIN, room[tight])
 
     def solve(self, time_limit_s: float, seed: int) -> _Solved | None:
         """The freed conflicts as CP-SAT decides them (None if it found nothing within the
