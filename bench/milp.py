@@ -62,8 +62,10 @@ class Config:
     out: Path = Path("docs/results/milp")
 
 
+# The quick run's limit leaves HiGHS room: it proves these two in 0.2 and 1.8 s on the
+# benchmark machine, and a slower hour of it (session 29's CI) ran past a 2-s limit.
 QUICK = Config(
-    sets=("wh_25",), per_set=2, limit_s=2.0, marks=(1.0, 2.0), out=Path("bench/out/milp")
+    sets=("wh_25",), per_set=2, limit_s=6.0, marks=(1.0, 6.0), out=Path("bench/out/milp")
 )
 
 
