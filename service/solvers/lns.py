@@ -391,8 +391,9 @@ class _Neighbourhood:
         have room for all of them."""
         cliques, graph = ctx.cliques, ctx.orientation
         clique, conflict = gather(graph.cq_start, graph.cq_clique, self.conflicts)  # (N,) pairs
+        _, _, _, f_hi = fleet.domains  # (M,) each; f_hi 0: never following-type
         # Others: forbidden (see literal_domains), never binding, or never following-type.
-        kept = fleet.binding[clique] & (fleet.domains[3][conflict] > 0)
+        kept = fleet.binding[clique] & (f_hi[conflict] > 0)
         order = np.argsort(clique[kept], kind="stable")
         clique, conflict = clique[kept][order], conflict[kept][order]
         touched, first = np.unique(clique, return_index=True)  # (T,)
