@@ -476,14 +476,18 @@ def _held_reach(
     tails = np.empty(16, dtype=np.int64)
     heads = np.empty(16, dtype=np.int64)
     count = 0
-    for u in starts:
-        for j in range(starts.size):
-            if reach[u, j // 64] >> np.uint64(j % 64) & np.uint64(1):
-                if count == tails.size:
-                    tails = np.concatenate((tails, np.empty(count, dtype=np.int64)))
-                    heads = np.concatenate((heads, np.empty(count, dtype=np.int64)))
-                tails[count], heads[count] = u, starts[j]
-                count += 1
+    for u in starts:  # the set bits only: a test of every start per start grows as S^2
+        for word in range(reach.shape[1]):
+            bits, j = reach[u, word], word * 64
+            while bits != 0:
+                if bits & np.uint64(1):
+                    if count == tails.size:
+                        tails = np.concatenate((tails, np.empty(count, dtype=np.int64)))
+                        heads = np.concatenate((heads, np.empty(count, dtype=np.int64)))
+                    tails[count], heads[count] = u, starts[j]
+                    count += 1
+                bits >>= np.uint64(1)
+                j += 1
     return _without_shortcuts(starts, tails[:count], heads[:count], n_nodes)
 
 
