@@ -6,12 +6,9 @@ timed request. ``test_warm_up.py`` runs it and expects none."""
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
-import numba
-
-from service.api.runtime import build_runtime, solve_every_way, warm_up
+from service.api.runtime import build_runtime, compiled_signatures, solve_every_way, warm_up
 from service.core.path_schemas import PathsRequest
 from service.geometry.graph import GeometrySettings
 from service.motion.plan import derived_request, plan_paths
@@ -24,30 +21,19 @@ MODEL_STORE = Path(__file__).resolve().parents[2] / "model_store"
 WORLDS = (("wh_two_lane", 40, 1), ("wh_parked", 12, 1), ("floor_dense", 12, 3), ("wh_mixed", 20, 1))
 
 
-def signatures() -> dict[str, set[str]]:
-    """Every loaded numba kernel of the service -> its compiled signatures."""
-    out: dict[str, set[str]] = {}
-    for name, module in list(sys.modules.items()):
-        if name.startswith("service"):
-            for attr, value in vars(module).items():
-                if isinstance(value, numba.core.registry.CPUDispatcher):
-                    out[f"{name}.{attr}"] = {str(sig) for sig in value.signatures}
-    return out
-
-
 def main() -> int:
     runtime = build_runtime(Settings(model_store=MODEL_STORE))
     warm_up(runtime)
     if not runtime.ready:
         print(json.dumps({"not ready": runtime.detail}))
         return 1
-    before = signatures()
+    before = compiled_signatures()
     for kind, robots, seed in WORLDS:
         world = generate(kind, robots, seed)
         solve_every_way(derived_request(world), runtime.policy, 0.2)
         paths = PathsRequest.model_validate(world.to_request())
         plan_paths(paths, runtime.policy, GeometrySettings())
-    after = signatures()
+    after = compiled_signatures()
     added = {k: sorted(v - before.get(k, set())) for k, v in after.items()}
     print(json.dumps({k: v for k, v in added.items() if v}))
     return 0
