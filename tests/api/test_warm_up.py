@@ -7,6 +7,11 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
+from service.api import runtime
+from service.solvers.dispatch import DispatchPolicy
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -20,3 +25,23 @@ def test_requests_after_the_warm_up_compile_no_kernel() -> None:
     )  # fmt: skip
     added = json.loads(run.stdout.strip().splitlines()[-1])
     assert added == {}, f"compiled after the warm-up: {added}"
+
+
+@pytest.mark.parametrize(
+    ("compiling_passes", "expected"), [(0, 1), (1, 2), (2, 3), (5, runtime.WARMUP_PASSES)]
+)
+def test_warm_up_passes_repeat_until_one_compiles_nothing(
+    compiling_passes: int, expected: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A pass that compiled (or loaded) a kernel is followed by another, up to
+    WARMUP_PASSES: on a cold cache the first pass runs past every solve's limit and
+    misses the steps taken only when time is left."""
+    passes: list[float] = []
+    monkeypatch.setattr(runtime, "solve_every_way", lambda _r, _p, limit: passes.append(limit))
+    monkeypatch.setattr(
+        runtime,
+        "compiled_signatures",
+        lambda: {"kernel": {str(min(len(passes), compiling_passes))}},
+    )
+    runtime.warm_solvers(DispatchPolicy())
+    assert passes == [runtime.WARMUP_SOLVER_S] * expected
