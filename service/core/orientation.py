@@ -38,6 +38,7 @@ from service.core.problem import Problem
 __all__ = ["Enumeration", "OrientationGraph"]
 
 UNSET = -1  # orientation of a conflict not decided yet (backtracking)
+NO_MOVE_LIMIT = int(np.iinfo(np.int64).max)  # an enumeration step without a move budget
 
 
 @numba.njit(cache=True, inline="always")
@@ -211,13 +212,17 @@ def _enumerate(
     graph: tuple,
     out_a: np.ndarray,
     out_f: np.ndarray,
-) -> int:
-    """Depth-first enumeration of valid assignments, resumable; returns the leaves written.
+    max_moves: int,
+) -> tuple[int, int]:
+    """Depth-first enumeration of valid assignments, resumable -> (leaves written, moves
+    made: values tried or undone at one depth each).
 
     ``state`` (M + 1,) holds the value index tried at each depth (-1: none) and,
     in its last slot, the current depth; ``orient``/``following``/``counts``
     are the partial assignment. Fills ``out_a``/``out_f`` (K, M) with the next
-    leaves, fewer than K only when the tree is exhausted (depth -1).
+    leaves, fewer than K when the tree is exhausted (depth -1) or after ``max_moves``
+    moves (the state is then where the next call goes on: a first leaf of 23,000
+    conflicts takes seconds, and its caller's time limit is checked between calls).
     Value k in 0..3 at a conflict: direction = preferred for k < 2, the other
     for k >= 2; type = ``follow_first`` for even k, the other for odd k. A fixed
     conflict stays oriented as ``base`` says (its preferred direction): k < 2 only.
@@ -227,9 +232,10 @@ def _enumerate(
     seen = np.zeros(succ.size, dtype=np.bool_)
     stack = np.empty(succ.size, dtype=np.int64)
     no_rank = np.zeros(succ.size, dtype=np.int64)  # the partial orientation changes each step
-    found = 0
+    found, moves = 0, 0
     depth = state[n_conf]
-    while depth >= 0 and found < out_a.shape[0]:
+    while depth >= 0 and found < out_a.shape[0] and moves < max_moves:
+        moves += 1
         e = order[depth]
         if state[depth] >= 0:  # undo this depth's current value before trying the next
             if following[e]:
@@ -277,7 +283,7 @@ def _enumerate(
         else:
             depth += 1
     state[n_conf] = depth
-    return found
+    return found, moves
 
 
 @dataclass
@@ -292,14 +298,16 @@ class Enumeration:
     orient: np.ndarray  # (M,) int8, starts as the fixed directions (graph.base)
     following: np.ndarray  # (M,) bool
     counts: np.ndarray  # (Q,) following-type conflicts per clique
+    moves: int = 0  # made so far (see _enumerate)
 
     @property
     def done(self) -> bool:
         """Whether every valid assignment has been produced."""
         return bool(self.state[-1] < 0)
 
-    def next(self, count: int) -> Assignments:
-        """Up to ``count`` further leaves, depth first (fewer once the tree is exhausted)."""
+    def next(self, count: int, max_moves: int = NO_MOVE_LIMIT) -> Assignments:
+        """Up to ``count`` further leaves, depth first: fewer once the tree is exhausted,
+        or after ``max_moves`` moves (none, possibly, before the first leaf)."""
         n_conf = self.order.size
         if self.done:
             return Assignments(np.zeros((0, n_conf), dtype=bool), np.zeros((0, n_conf), dtype=bool))
@@ -308,11 +316,12 @@ class Enumeration:
             return Assignments(np.zeros((1, 0), dtype=bool), np.zeros((1, 0), dtype=bool))
         out_a = np.zeros((count, n_conf), dtype=bool)
         out_f = np.zeros((count, n_conf), dtype=bool)
-        found = _enumerate(
+        found, moves = _enumerate(
             self.order, self.prefer_a, self.graph.may_follow, self.follow_first,
             self.state, self.orient, self.following, self.counts,
-            self.graph.kernel_args(), out_a, out_f,
+            self.graph.kernel_args(), out_a, out_f, max_moves,
         )  # fmt: skip
+        self.moves += moves
         return Assignments(out_a[:found], out_f[:found])
 
 

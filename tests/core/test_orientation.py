@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from service.core.assignment import Assignments
 from service.core.check import check
@@ -45,16 +47,26 @@ def test_exhaustive_enumeration_is_exactly_the_valid_set(req: dict) -> None:
     assert set(keys) == expected
 
 
-def test_enumeration_resumes_where_it_stopped() -> None:
-    graph = _graph(tiny_request(3))
+@settings(max_examples=40, deadline=None, derandomize=True)
+@given(seed=st.integers(0, 10_000), count=st.integers(1, 5), moves=st.integers(1, 7))
+def test_enumeration_resumes_where_it_stopped(seed: int, count: int, moves: int) -> None:
+    """Cut after ``count`` leaves or ``moves`` moves, whichever comes first, and resumed:
+    the same leaves in the same order as one uncut enumeration, and the same moves."""
+    graph = _graph(tiny_request(seed))
     m = graph.problem.n_conflicts
-    args = (np.arange(m), np.ones(m, dtype=bool), True)
-    whole = _keys(graph.enumerate(*args).next(100_000))
+    if m == 0:
+        return  # one leaf, no move
+    args = (np.random.default_rng(seed).permutation(m), np.ones(m, dtype=bool), bool(seed % 2))
+    uncut = graph.enumerate(*args)
+    whole = _keys(uncut.next(100_000))
     search = graph.enumerate(*args)
     pieces: list = []
     while not search.done:
-        pieces += _keys(search.next(3))
+        before = search.moves
+        pieces += _keys(search.next(count, moves))
+        assert 0 < search.moves - before <= moves
     assert pieces == whole
+    assert search.moves == uncut.moves
 
 
 def test_first_leaves_of_a_large_problem_are_valid_and_distinct() -> None:

@@ -18,9 +18,10 @@ from hypothesis import strategies as st
 from service.core import evaluate
 from service.core.check import check
 from service.core.retype import refit_types
-from service.core.schemas import OBJECTIVES
+from service.core.schemas import OBJECTIVES, ScheduleRequest
 from service.learning.generate import stitched_problem
 from service.solvers.bbts import LEAVES, bbts
+from service.solvers.dispatch import DispatchPolicy, dispatch
 from service.solvers.fcfs import blended_priorities, fcfs
 from service.solvers.priority import (
     PriorityConfig,
@@ -208,6 +209,33 @@ def test_bbts_finds_the_brute_force_optimum_on_tiny_problems(objective: str, see
     out = bbts(ctx)
     assert out.samples == len(candidates)
     assert cost(ctx, out) == pytest.approx(min(c.costs[objective] for c in candidates))
+
+
+class _SlowClock:
+    """A ``time`` module whose every reading is a second after the last."""
+
+    def __init__(self) -> None:
+        self.now = 0.0
+
+    def perf_counter(self) -> float:
+        self.now += 1.0
+        return self.now
+
+
+def test_bbts_without_its_first_leaf_in_time_gives_no_answer_and_the_dispatcher_falls_back(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Enumeration steps are timed and the limit checked between them: where the first
+    leaf (1,000 conflicts decided) is not reached when the limit has passed, bbts gives no
+    answer instead of running on (a 250-robot warehouse's first leaf took 8-9 s), and FCFS
+    answers for it."""
+    monkeypatch.setattr("service.solvers.bbts.time", _SlowClock())
+    request = {**stitched_problem(1, 250, 4.0), "objective": "avg_completion"}
+    assert bbts(context(request, "avg_completion", 0.5)) is None
+    body = {**request, "options": {"solver": "bbts", "time_limit_s": 0.5}}
+    answer = dispatch(ScheduleRequest.model_validate(body), DispatchPolicy())
+    assert (answer.solver.name, answer.solver.fallback_from) == ("fcfs", "bbts")
+    assert answer.checks.acyclic and answer.checks.density and answer.checks.forced
 
 
 def test_bbts_when_the_tree_ends_exactly_at_a_batch_boundary(
