@@ -69,3 +69,26 @@ def test_time_limit_is_honoured(objective: str) -> None:
     assert time.perf_counter() - start < ctx.time_limit_s + 1.0
     assert check(ctx.problem, ctx.cliques, best).ok.tolist() == [True]
     assert found <= _fcfs_cost(ctx)
+
+
+def test_no_generation_starts_that_would_end_past_the_limit(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Each generation is timed; the next starts only where one as long ends in time (at
+    250 robots a generation takes 0.2-0.35 s, and 0.5-s requests ran 0.78-0.92 s). Here
+    decoding takes 0.3 s of a 0.5-s limit: one generation, then the answer."""
+    import service.solvers.cmaes as module
+
+    decode = module.decode_candidates
+
+    def slow_decode(*args: object, **kwargs: object) -> object:
+        time.sleep(0.3)
+        return decode(*args, **kwargs)
+
+    ctx = _ctx(1, "avg_completion", time_limit_s=0.5)
+    cmaes(_ctx(0, "avg_completion", time_limit_s=0.1))  # compiled before the clock
+    monkeypatch.setattr(module, "decode_candidates", slow_decode)
+    start = time.perf_counter()
+    out = cmaes(ctx)
+    assert time.perf_counter() - start < 0.5
+    assert check(ctx.problem, ctx.cliques, out.assignment).ok.tolist() == [True]

@@ -31,6 +31,7 @@ from service.solvers.priority import (
     reversed_in,
     shifted_flips,
 )
+from service.solvers.registry import SolveContext
 from service.solvers.tabu import TabuConfig, tabu, tabu_search
 from tests.reference import feasible_assignments, fix_directions, reference_problem, tiny_request
 from tests.solvers.common import context, cost
@@ -69,6 +70,24 @@ def test_time_limit_is_honoured(name: str) -> None:
     start = time.perf_counter()
     out = SOLVERS[name](ctx)
     assert time.perf_counter() - start < 0.05 + 1.0
+    assert check(ctx.problem, ctx.cliques, out.assignment).ok.tolist() == [True]
+
+
+def test_tabu_counts_the_time_its_start_took(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The start (FCFS's cheapest blend, 0.14 s at 250 robots) is searched within the time
+    limit, not before it: a start that takes the whole limit leaves no tabu iteration."""
+    import service.solvers.tabu as module
+
+    find_start = module.plain_start
+
+    def slow_start(ctx: SolveContext) -> Any:
+        time.sleep(ctx.time_limit_s)
+        return find_start(ctx)
+
+    ctx = _ctx(stitched_problem(2, 30, 4.0), "avg_completion", time_limit_s=0.2)
+    monkeypatch.setattr(module, "plain_start", slow_start)
+    out = tabu(ctx)
+    assert out.detail == "0 tabu iterations"
     assert check(ctx.problem, ctx.cliques, out.assignment).ok.tolist() == [True]
 
 
