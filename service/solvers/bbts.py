@@ -25,8 +25,10 @@ __all__ = ["BATCH", "LEAVES", "bbts"]
 LEAVES = 1000  # valid assignments enumerated (the published budget)
 BATCH = 100  # leaves enumerated and evaluated per step, at most
 # An enumeration step makes at most the moves (values tried or undone at one depth) that
-# SLICE_S, or the time left if less, holds at the last step's pace: the time limit is
-# checked between steps. The first leaf of a 250-robot warehouse (11,000-23,000
+# SLICE_S, or the time left if less, holds at the last step's pace, and at most twice the
+# last step's (a move's cycle check costs more the deeper it is: 256 shallow moves in
+# 2.4 ms foretold 5,373 in 50 ms, which took 341 ms): the time limit is checked between
+# steps. The first leaf of a 250-robot warehouse (11,000-23,000
 # conflicts, a cycle check each) took 8-9 s, and with steps of 100 leaves bbts answered a
 # 0.5-s request in 9-11 s and overran 1.8 s by 0.34 s on 100 robots (session 30).
 SLICE_S = 0.05
@@ -47,7 +49,7 @@ def bbts(ctx: SolveContext) -> SolverOutput | None:
     search = ctx.orientation.enumerate(order, prefer_a, follow_first=True)
     best, best_cost, seen, moves = None, np.inf, 0, FIRST_MOVES
     while seen < LEAVES and not search.done and moves > 0:
-        began, made = time.perf_counter(), search.moves
+        began, before = time.perf_counter(), search.moves
         leaves = search.next(min(BATCH, LEAVES - seen), moves)
         if leaves.n_samples > 0:
             seen += leaves.n_samples
@@ -55,9 +57,10 @@ def bbts(ctx: SolveContext) -> SolverOutput | None:
             k = int(np.argmin(costs))
             if costs[k] < best_cost:
                 best, best_cost = leaves.take(k), float(costs[k])
-        now = time.perf_counter()
-        per_move = (now - began) / max(search.moves - made, 1)
-        moves = int(min(SLICE_S, deadline - now) / per_move) if per_move > 0 else FIRST_MOVES
+        now, made = time.perf_counter(), search.moves - before
+        per_move = (now - began) / max(made, 1)
+        fit = int(min(SLICE_S, deadline - now) / per_move) if per_move > 0 else 2 * made
+        moves = min(fit, 2 * max(made, 1))
     if best is None:
         return None
     return SolverOutput(best, samples=seen, detail=f"{seen} assignments enumerated")
