@@ -8,6 +8,7 @@ import json
 import time
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import networkx as nx
 import numpy as np
@@ -261,12 +262,38 @@ def test_lns_ends_at_its_deadline_with_a_valid_answer() -> None:
     begin = time.monotonic()
     found, cost, steps, optimal = lns.lns_search(ctx, start, begin + 0.5, 0)
     elapsed = time.monotonic() - begin
-    assert 0.5 - lns.MIN_STEP_S <= elapsed <= 0.5 + 0.3  # ends at, not far past, its deadline
+    # Ends at, not far past, its deadline; the last step that was not started had less
+    # than MIN_STEP_S beyond the last build's time left (builds take ~10-30 ms here).
+    assert 0.5 - lns.MIN_STEP_S - 0.07 <= elapsed <= 0.5 + 0.3
     assert steps >= 1
     assert not optimal  # 50 robots: no step frees them all (MAX_ROBOTS)
     checks = check(ctx.problem, ctx.cliques, found)
     assert checks.acyclic[0] and checks.density[0]
     assert cost <= float(ctx.evaluator.evaluate(start).costs["avg_completion"][0])
+
+
+def test_no_step_starts_whose_build_would_run_past_the_deadline(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A step is built only where the time left exceeds MIN_STEP_S plus the last build's
+    time (30-50 ms at 250 robots, where 0.2-s requests ran 0.24 s). With builds of 0.12 s
+    and 0.25 s: the first step's sub-problem solved (~20 ms), what is left does not hold
+    another build, and none is started."""
+    ctx = _context(_conformance("wh_50")["request"], "avg_completion")
+    build = lns._Neighbourhood.__init__
+    builds: list[float] = []
+
+    def slow_build(self: lns._Neighbourhood, *args: Any) -> None:
+        builds.append(time.monotonic())
+        time.sleep(0.12)
+        build(self, *args)
+
+    monkeypatch.setattr(lns._Neighbourhood, "__init__", slow_build)
+    start = plain_start(ctx)
+    begin = time.monotonic()
+    found = lns.lns_search(ctx, start, begin + 0.25, 0)
+    assert (len(builds), found.steps) == (1, 1)
+    assert time.monotonic() - begin < 0.25 + 0.05
 
 
 @pytest.mark.parametrize("objective", lns.LNS_OBJECTIVES)
