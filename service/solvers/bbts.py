@@ -27,10 +27,10 @@ BATCH = 100  # leaves enumerated and evaluated per step, at most
 # An enumeration step makes at most the moves (values tried or undone at one depth) that
 # SLICE_S, or the time left if less, holds at the last step's pace, and at most twice the
 # last step's (a move's cycle check costs more the deeper it is: 256 shallow moves in
-# 2.4 ms foretold 5,373 in 50 ms, which took 341 ms): the time limit is checked between
-# steps. The first leaf of a 250-robot warehouse (11,000-23,000
-# conflicts, a cycle check each) took 8-9 s, and with steps of 100 leaves bbts answered a
-# 0.5-s request in 9-11 s and overran 1.8 s by 0.34 s on 100 robots (session 30).
+# 2.4 ms foretold 5,373 in 50 ms, which took 341 ms); the time limit is checked between
+# steps. With steps of 100 leaves, a 250-robot warehouse's first leaf (11,000-23,000
+# conflicts, a cycle check each) took a 0.5-s request to 9-11 s, and 100 robots overran
+# 1.8 s by 0.34 s (session 30).
 SLICE_S = 0.05
 FIRST_MOVES = 256  # moves of the first step, which times the next
 

@@ -37,7 +37,7 @@ from service.solvers.registry import SolveContext, SolverOutput, register
 __all__ = ["BATCH", "DEFAULT_SAMPLES", "random_search"]
 
 DEFAULT_SAMPLES = 100  # input rows drawn when the request does not say
-BATCH = 64  # input rows decoded and evaluated per call
+BATCH = 64  # input rows drawn at a time (decoded in chunks the time left holds)
 
 
 def _best_of(ctx: SolveContext, bids: np.ndarray, scores: np.ndarray) -> tuple[Assignments, float]:
