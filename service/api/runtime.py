@@ -254,11 +254,13 @@ def warm_solvers(policy: DispatchPolicy) -> None:
     request = derived_request(generate(*WARMUP_WORLD))
     if request is None:
         raise RuntimeError(f"the warm-up world {WARMUP_WORLD} derives no problem")
+    before = compiled_signatures()
     for _ in range(WARMUP_PASSES):
-        before = compiled_signatures()
         solve_every_way(request, policy, WARMUP_SOLVER_S)
-        if compiled_signatures() == before:
+        after = compiled_signatures()
+        if after == before:
             return
+        before = after
 
 
 def solve_every_way(request: ScheduleRequest, policy: DispatchPolicy, time_limit_s: float) -> None:
