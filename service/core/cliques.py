@@ -26,13 +26,14 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from contextvars import ContextVar
 from dataclasses import dataclass
+from functools import cached_property
 
 import numba
 import numpy as np
 from numba import types
 from numba.typed import List
 
-from service.core.csr import csr
+from service.core.csr import csr, select, transpose
 from service.core.problem import Problem
 
 __all__ = [
@@ -114,6 +115,20 @@ class Cliques:
     def clique_of_incidence(self) -> np.ndarray:
         """(E,) int: the clique of each incidence."""
         return np.repeat(np.arange(self.budget.size), self.size)
+
+    @cached_property
+    def by_conflict(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each conflict's cliques: (start (M+1,), cliques (E,) ascending within a conflict),
+        conflict c's are ``cliques[start[c]:start[c + 1]]``. Cached: the orientation graph
+        and, through :attr:`binding_by_conflict`, the decoder, re-insertion and LNS read
+        it (0.26 s for the 14 million incidences of a 250-robot warehouse)."""
+        return transpose(self.start, self.edge, self.n_conflicts)
+
+    @cached_property
+    def binding_by_conflict(self) -> tuple[np.ndarray, np.ndarray]:
+        """:attr:`by_conflict` restricted to the :meth:`binding` cliques, the only ones
+        whose budget a search must count (same layout)."""
+        return select(*self.by_conflict, self.binding())
 
     def forbidden(self) -> np.ndarray:
         """(M,) bool: conflicts inside a zero-budget clique, which must be exclusive."""

@@ -267,11 +267,7 @@ class Decoder:
         thousands of cliques (20,000 within the service's bound) while the others sit in
         one, and the padded table then took gigabytes.
         """
-        cl = self.cliques
-        binding = cl.binding()  # (Q,)
-        keep = np.repeat(binding, cl.size)  # (E,) incidences of binding cliques
-        inc_clique = np.repeat(np.flatnonzero(binding), cl.size[binding])  # (E',) ascending
-        start, cliques = csr(cl.edge[keep], inc_clique, cl.n_conflicts)  # (M+1,), (E',)
+        start, cliques = self.cliques.binding_by_conflict  # (M+1,), (E',)
         self._bound_edges = np.flatnonzero(np.diff(start))  # (B,)
         self._bound_start = np.append(start[self._bound_edges], start[-1])  # (B+1,)
         self._bound_cliques = cliques  # (E',) conflict b's: start[b]:start[b+1], ascending

@@ -340,9 +340,7 @@ class OrientationGraph:
             np.tile(np.arange(n_conf), 2),
             n_nodes,
         )  # node -> incident conflicts
-        self.cq_start, self.cq_clique = csr(
-            cliques.edge, cliques.clique_of_incidence, n_conf
-        )  # conflict -> its cliques
+        self.cq_start, self.cq_clique = cliques.by_conflict  # conflict -> its cliques
         self.may_follow = ~cliques.forbidden()  # (M,)
         self.base = _fixed_orientation(problem)
 

@@ -58,7 +58,6 @@ import numba
 import numpy as np
 
 from service.core.assignment import Assignments
-from service.core.csr import csr
 from service.core.evaluate import Evaluation
 from service.solvers.registry import SolveContext, SolverOutput, register
 from service.solvers.tabu import plain_start
@@ -142,11 +141,8 @@ class _Static(NamedTuple):
         pair_event = graph.target.reshape(n_conf, 2)  # (M, 2) each side's pair-enter event
         ev_node[pair_event[:, 0]] = p.conf_a
         ev_node[pair_event[:, 1]] = p.conf_b
-        binding = ctx.cliques.binding()
-        cq_start, cq_clique = ctx.orientation.cq_start, ctx.orientation.cq_clique
-        keep = binding[cq_clique]  # only cliques whose budget can bind are counted
-        conflict_of = np.repeat(np.arange(n_conf), np.diff(cq_start))
-        cq_start, cq_clique = csr(conflict_of[keep], cq_clique[keep], n_conf)
+        # Only cliques whose budget can bind are counted.
+        cq_start, cq_clique = ctx.cliques.binding_by_conflict
         return cls(
             rc_start.astype(np.int64),
             (order // 2).astype(np.int64),

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from itertools import pairwise
 from typing import Any
 
 import networkx as nx
@@ -21,7 +22,7 @@ from service.core.cliques import (
     clique_budget,
     find_cliques,
 )
-from service.core.csr import csr, gather
+from service.core.csr import csr, gather, select, transpose
 from service.core.problem import Problem, problem_from_request
 from service.core.schemas import ScheduleRequest
 from service.learning.generate import small_problem
@@ -217,6 +218,50 @@ def test_gather_reads_the_rows_of_the_keys_asked_for(keys: list[int], rows: list
     values, owner = gather(start, grouped, np.array(rows, dtype=np.int64))
     expected = [(v, r) for r in rows for v in grouped[start[r] : start[r + 1]].tolist()]
     assert list(zip(values.tolist(), owner.tolist(), strict=True)) == expected
+
+
+rows_of_values = st.lists(st.lists(st.integers(0, 6), max_size=8), max_size=12)
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(rows=rows_of_values)
+def test_transpose_lists_the_rows_of_each_value_in_row_order(rows: list[list[int]]) -> None:
+    start = np.concatenate([[0], np.cumsum([len(r) for r in rows])]).astype(np.int64)
+    values = np.array([v for r in rows for v in r], dtype=np.int64)
+    by_value, row_of = transpose(start, values, 7)
+    expected = [[i for i, r in enumerate(rows) for v in r if v == value] for value in range(7)]
+    assert [row_of[by_value[v] : by_value[v + 1]].tolist() for v in range(7)] == expected
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(rows=rows_of_values, keep=st.lists(st.booleans(), min_size=7, max_size=7))
+def test_select_keeps_the_kept_values_of_each_row_in_order(
+    rows: list[list[int]], keep: list[bool]
+) -> None:
+    start = np.concatenate([[0], np.cumsum([len(r) for r in rows])]).astype(np.int64)
+    values = np.array([v for r in rows for v in r], dtype=np.int64)
+    kept_start, kept = select(start, values, np.array(keep))
+    expected = [[v for v in r if keep[v]] for r in rows]
+    assert [kept[kept_start[i] : kept_start[i + 1]].tolist() for i in range(len(rows))] == expected
+    assert kept_start[-1] == kept.size
+
+
+def test_conflict_cliques_are_the_cliques_holding_each_conflict() -> None:
+    mixed = 0  # problems with binding and other cliques both
+    for seed in range(12):
+        cliques = find_cliques(_problem(tiny_request(seed)))
+        binding = cliques.binding()
+        mixed += bool(binding.any() and not binding.all())
+        start, held = cliques.by_conflict
+        b_start, b_held = cliques.binding_by_conflict
+        inside = [set(cliques.edge[lo:hi].tolist()) for lo, hi in pairwise(cliques.start)]
+        for c in range(cliques.n_conflicts):
+            expected = [q for q, conflicts in enumerate(inside) if c in conflicts]
+            assert held[start[c] : start[c + 1]].tolist() == expected
+            assert b_held[b_start[c] : b_start[c + 1]].tolist() == [
+                q for q in expected if binding[q]
+            ]
+    assert mixed >= 3
 
 
 def test_find_cliques_names_the_bound_it_exceeds() -> None:
