@@ -186,6 +186,23 @@ def test_segments_are_ordered_as_python_orders_lists(segments: list[list[int]]) 
     assert order.tolist() == sorted(range(len(segments)), key=lambda q: segments[q])
 
 
+@settings(max_examples=100, deadline=None, derandomize=True)
+@given(
+    segments=st.lists(st.lists(st.integers(0, 9), max_size=6), max_size=30),
+    presorted=st.lists(st.booleans(), min_size=30, max_size=30),
+)
+def test_sort_segments_sorts_each_segment_in_place(
+    segments: list[list[int]], presorted: list[bool]
+) -> None:
+    segments = [
+        sorted(seg) if keep else seg for seg, keep in zip(segments, presorted, strict=False)
+    ]
+    values = np.array([v for seg in segments for v in seg], dtype=np.int64)
+    bounds = np.cumsum([0, *map(len, segments)]).astype(np.int64)
+    module._sort_segments(values, bounds)
+    assert values.tolist() == [v for seg in segments for v in sorted(seg)]
+
+
 def test_find_cliques_lists_cliques_and_their_conflicts_in_canonical_order() -> None:
     problem = _problem(small_problem(3))
     cl = find_cliques(problem)
