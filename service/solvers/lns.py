@@ -207,12 +207,13 @@ class _Fleet:
     def pick(
         self, rng: np.random.Generator, current: _Incumbent, count: int, busy: np.ndarray
     ) -> np.ndarray:
-        """``count`` robots (fewer if the seed's conflict component is smaller), none of
-        the ``busy`` ones (R,) bool (not all): a seed drawn by delay, then robots drawn by
-        conflicts shared with those picked, a wait that binds between them counting
-        BLOCKING_WEIGHT more."""
+        """``count`` robots (fewer if fewer are not ``busy``), none of the ``busy`` ones
+        (R,) bool (not all): a seed drawn by delay, then robots drawn by conflicts shared
+        with those picked, a wait that binds between them counting BLOCKING_WEIGHT more;
+        where the seed's conflict component runs out, another seed drawn by delay (so
+        that a fleet of several components can be freed whole, and proven optimal)."""
         n_robots = current.delay.size
-        weight = (np.maximum(current.delay, 0.0) + 1e-9) * ~busy
+        weight = (np.maximum(current.delay, 0.0) + 1e-9) * ~busy  # (R,)
         picked = [int(rng.choice(n_robots, p=weight / weight.sum()))]
         score = np.zeros(n_robots)  # (R,) conflicts shared with the robots picked
         while len(picked) < count:
@@ -222,9 +223,14 @@ class _Fleet:
             score[picked] = 0.0
             score[busy] = 0.0
             total = score.sum()
-            if total <= 0:
+            if total > 0:
+                picked.append(int(rng.choice(n_robots, p=score / total)))
+                continue
+            rest = weight.copy()  # the component is exhausted: a new seed, by delay
+            rest[picked] = 0.0
+            if rest.sum() <= 0:
                 break
-            picked.append(int(rng.choice(n_robots, p=score / total)))
+            picked.append(int(rng.choice(n_robots, p=rest / rest.sum())))
         return np.array(picked, dtype=np.int64)
 
 
@@ -559,6 +565,7 @@ def lns_search(
     fleet = _Fleet.of(ctx)
     rng = np.random.default_rng(seed)
     n_robots = ctx.problem.n_robots
+    involved = np.flatnonzero(np.diff(fleet.robot_conflicts[0]))  # robots in a conflict
     best, current = start, _Incumbent.start(ctx, fleet, start)
     sizes, steps, build_s = _Sizes(n_robots, converge, robots), 0, 0.0
     # Each running sub-problem and the incumbent it was built on.
@@ -585,8 +592,9 @@ def lns_search(
             job = next(iter(wait(running, return_when=FIRST_COMPLETED).done))
             neighbourhood, base = running.pop(job)
             solved = job.result()
-            # A proof holds only for the incumbent the whole problem was built on.
-            whole = neighbourhood.robots.size == n_robots
+            # A proof holds only for the incumbent the whole problem was built on; robots
+            # in no conflict need not be freed (nothing couples their times to others').
+            whole = bool(np.isin(involved, neighbourhood.robots).all())
             proven = solved is not None and solved.optimal and whole and base is current
             found = None if solved is None else neighbourhood.onto(current, solved)
             better = None if found is None else _cheaper(ctx, fleet, current, found, proven)

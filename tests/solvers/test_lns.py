@@ -231,6 +231,42 @@ def test_a_proof_comes_only_from_a_step_that_freed_every_robot(
     assert proofs >= 6
 
 
+@pytest.mark.parametrize("source", ["tiny", "small"])
+def test_fleets_of_several_components_or_idle_robots_are_proven_whole(source: str) -> None:
+    """A step picks every robot once the seed's conflict component runs out, and a step
+    that freed every robot in a conflict proves: every problem of 2-8 robots is proven
+    within its second (several had conflict components or robots in no conflict, and ran
+    to the deadline unproven)."""
+    several = 0  # problems whose robots in conflicts are not one component
+    for seed in range(12):
+        request = tiny_request(seed) if source == "tiny" else small_problem(seed)
+        ctx = _context(request, "avg_completion")
+        fleet = lns._Fleet.of(ctx)
+        involved = np.flatnonzero(np.diff(fleet.robot_conflicts[0]))
+        components = nx.connected_components(nx.from_scipy_sparse_array(fleet.shared))
+        several += sum(len(c) > 1 for c in components) > 1 or involved.size < ctx.problem.n_robots
+        begin = time.monotonic()
+        found = lns.lns_search(ctx, plain_start(ctx), begin + 1.0, seed)
+        assert found.optimal and time.monotonic() - begin < 1.0
+        if source == "tiny":
+            best = min(
+                c.costs["avg_completion"] for c in feasible_assignments(reference_problem(request))
+            )
+            assert found.cost == pytest.approx(best, rel=1e-6, abs=1e-9)
+    assert several >= 2
+
+
+def test_a_step_as_large_as_the_fleet_picks_every_free_robot() -> None:
+    ctx = _context(small_problem(2), "avg_completion")
+    fleet = lns._Fleet.of(ctx)
+    current = lns._Incumbent.start(ctx, fleet, plain_start(ctx))
+    n = ctx.problem.n_robots
+    busy = np.zeros(n, dtype=bool)
+    busy[0] = True
+    picked = fleet.pick(np.random.default_rng(0), current, n, busy)
+    assert sorted(picked.tolist()) == list(range(1, n))
+
+
 def test_a_plateau_grows_the_neighbourhood(monkeypatch: pytest.MonkeyPatch) -> None:
     """With no sub-problem ever improving, each size is tried until the robots freed cover
     the fleet, then it grows by GROWTH up to MAX_ROBOTS."""
