@@ -88,6 +88,15 @@ class ReinsertConfig:
     growth: float = 1.5
     max_robots: int = 32
     blocking_weight: float = 10.0  # a binding wait against 1 per shared conflict
+    # Steps without improvement, each re-inserting the whole fleet (in ``orders`` random
+    # orders), after which the search ends (None: never): only fleets of up to
+    # max_robots get there. The ``reinsert`` solver sets it, so that a 4-robot problem
+    # no longer takes the whole time limit (5 s by default); ``auto``'s turns do not
+    # (unmeasured there).
+    whole_fleet_plateau: int | None = None
+
+
+SOLVER_CONFIG = ReinsertConfig(whole_fleet_plateau=64)  # the ``reinsert`` solver's
 
 
 class ReinsertResult(NamedTuple):
@@ -466,7 +475,9 @@ def reinsert_search(
     max_steps: int | None = None,
 ) -> ReinsertResult:
     """Re-insertion LNS from the valid ``start`` until ``deadline`` (monotonic) or
-    ``max_steps`` steps (None: no cap), whichever comes first, or until no robot waits."""
+    ``max_steps`` steps (None: no cap), whichever comes first, or until no robot waits,
+    or after ``config.whole_fleet_plateau`` steps without improvement that each
+    re-inserted the whole fleet."""
     st = _Static.of(ctx)
     weight = ctx.evaluator.objective_weights(ctx.objective)
     budget = ctx.cliques.budget.astype(np.int64)
@@ -481,7 +492,10 @@ def reinsert_search(
     while time.monotonic() < deadline and (max_steps is None or steps < max_steps):
         if not (current.robot_delay > TOL).any():
             break  # nobody waits (delays never fall along a path): the free cost, optimal
-        if stalled * count >= config.stall_cover * n_robots:
+        plateau = config.whole_fleet_plateau
+        if count == n_robots and plateau is not None and stalled >= plateau:
+            break
+        if count < n_robots and stalled * count >= config.stall_cover * n_robots:
             count, stalled = min(int(count * config.growth) + 1, config.max_robots, n_robots), 0
         picked = _pick(
             st, count, np.maximum(current.robot_delay, 0.0) + 1e-9, current.blocking,
@@ -699,5 +713,5 @@ def reinsert(ctx: SolveContext) -> SolverOutput:
     start = plain_start(ctx)
     if ctx.objective not in REINSERT_OBJECTIVES:
         return SolverOutput(start, detail=f"no re-insertion for {ctx.objective}")
-    found = reinsert_search(ctx, start, deadline, ctx.seed)
+    found = reinsert_search(ctx, start, deadline, ctx.seed, SOLVER_CONFIG)
     return SolverOutput(found.best, detail=f"{found.steps} re-insertion steps")

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import networkx as nx
@@ -230,6 +231,26 @@ def test_robots_fixed_to_pass_first_are_put_back_first(
         # Kahn's order taking the earliest ready robot of the random order each time.
         given = {int(r): i for i, r in enumerate(robots)}
         assert order.tolist() == list(nx.lexicographical_topological_sort(graph, key=given.get))
+
+
+def test_the_solver_ends_on_a_plateau_of_whole_fleet_steps() -> None:
+    """The ``reinsert`` solver on a 4-robot problem that keeps a wait: once every step
+    re-inserts the whole fleet, ``whole_fleet_plateau`` steps without improvement end the
+    search long before its deadline (it took the whole time limit); ``auto``'s turns keep
+    searching (no plateau in the default configuration)."""
+    ctx = _context(tiny_request(0), "avg_completion")
+    config = reinsert.SOLVER_CONFIG
+    assert config.whole_fleet_plateau is not None
+    begin = time.monotonic()
+    found = reinsert.reinsert_search(ctx, plain_start(ctx), begin + 10.0, 0, config)
+    assert time.monotonic() - begin < 2.0
+    assert config.whole_fleet_plateau <= found.steps < config.whole_fleet_plateau + 20
+    capped = reinsert.reinsert_search(ctx, plain_start(ctx), begin + 60.0, 0, max_steps=300)
+    assert capped.steps == 300
+    begin = time.monotonic()
+    solver_ctx = replace(_context(tiny_request(0), "avg_completion"), time_limit_s=10.0)
+    answer = reinsert.reinsert(solver_ctx)
+    assert time.monotonic() - begin < 2.0 and answer.detail == f"{found.steps} re-insertion steps"
 
 
 def test_the_search_stops_where_nobody_waits() -> None:
