@@ -26,7 +26,6 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from contextvars import ContextVar
 from dataclasses import dataclass
-from functools import cached_property
 
 import numba
 import numpy as np
@@ -34,6 +33,7 @@ from numba import types
 from numba.typed import List
 
 from service.core.csr import csr, select, transpose
+from service.core.lazy import cached_property
 from service.core.problem import Problem
 
 __all__ = [

@@ -19,12 +19,12 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from functools import cached_property
 from typing import Any, NamedTuple
 
 import numpy as np
 
 from service.core.digraph import components
+from service.core.lazy import cached_property
 from service.core.schemas import ScheduleRequest
 
 __all__ = [

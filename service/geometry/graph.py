@@ -26,13 +26,13 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from functools import cached_property
 from typing import Any
 
 import networkx as nx
 import numba
 import numpy as np
 
+from service.core.lazy import cached_property
 from service.core.path_schemas import PathsRequest
 from service.core.problem import (
     DensityLimit,

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from dataclasses import dataclass
-from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -23,6 +22,7 @@ from service.core.assignment import Assignments
 from service.core.cliques import Cliques, find_cliques
 from service.core.decode import Decoder
 from service.core.evaluate import Evaluator
+from service.core.lazy import cached_property
 from service.core.problem import Problem, problem_from_request
 from service.core.schemas import Objective, ScheduleRequest
 from service.learning.features import GraphTensors, assignment_edge_features, graph_tensors

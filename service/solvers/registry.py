@@ -11,13 +11,13 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from functools import cached_property
 from typing import TYPE_CHECKING
 
 from service.core.assignment import Assignments
 from service.core.cliques import Cliques, find_cliques
 from service.core.decode import Decoder
 from service.core.evaluate import Evaluator
+from service.core.lazy import cached_property
 from service.core.orientation import OrientationGraph
 from service.core.problem import Problem
 from service.core.schemas import Objective
