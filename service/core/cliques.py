@@ -111,11 +111,6 @@ class Cliques:
         """(Q,) int: conflicts inside each clique."""
         return np.diff(self.start)
 
-    @property
-    def clique_of_incidence(self) -> np.ndarray:
-        """(E,) int: the clique of each incidence."""
-        return np.repeat(np.arange(self.budget.size), self.size)
-
     @cached_property
     def by_conflict(self) -> tuple[np.ndarray, np.ndarray]:
         """Each conflict's cliques: (start (M+1,), cliques (E,) ascending within a conflict),

@@ -529,7 +529,7 @@ def _without_shortcuts(
 
 class LnsResult(NamedTuple):
     """What a search ended with: the best answer, its cost, the steps taken, and whether it
-    is proven optimal (a step that freed every robot, proven by CP-SAT)."""
+    is proven optimal (a step that freed every robot in a conflict, proven by CP-SAT)."""
 
     best: Assignments
     cost: float
@@ -547,8 +547,8 @@ def lns_search(
 ) -> LnsResult:
     """LNS from the valid ``start`` until ``deadline`` (monotonic), or with ``converge``
     until a plateau at the largest neighbourhood (min(MAX_ROBOTS, fleet)); at once when a
-    step that freed every robot (the whole problem, nothing held) is proven optimal. The
-    first neighbourhoods free ``robots`` robots.
+    step that freed every robot in a conflict (the whole problem: nothing held that
+    could wait) is proven optimal. The first neighbourhoods free ``robots`` robots.
 
     ``ctx.workers`` sub-problems are solved at once, each in a thread (CP-SAT releases
     the GIL): while one is solved the next is built, from robots that no running one
@@ -674,7 +674,7 @@ def lns(ctx: SolveContext) -> SolverOutput:
     if ctx.objective not in LNS_OBJECTIVES:
         return SolverOutput(start, detail=f"no LNS for {ctx.objective}")
     found = lns_search(ctx, start, deadline, ctx.seed)
-    verdict = "; proven optimal (every robot freed)" if found.optimal else ""
+    verdict = "; proven optimal (every robot in a conflict freed)" if found.optimal else ""
     return SolverOutput(
         found.best, optimal=found.optimal, detail=f"{found.steps} LNS steps{verdict}"
     )

@@ -265,7 +265,7 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
             best, cost = replace(best, assignment=found.best), found.cost
             stages.append(f"lns x{steps}")
         if found.optimal:
-            verdict = "proven optimal by LNS (every robot freed)"
+            verdict = "proven optimal by LNS (every robot in a conflict freed)"
             return replace(best, optimal=True, detail=_detail(stages, verdict))
         if last:
             verdict = (

@@ -96,7 +96,7 @@ def test_decode_is_always_valid(data: st.DataObject, seed: int, tiny: bool, samp
     counts = cliques.following_counts(out.following)  # (S, Q)
     full = counts >= cliques.budget  # (S, Q)
     for s, c in zip(*np.nonzero(candidate & ~out.following), strict=True):
-        holders = cliques.clique_of_incidence[cliques.edge == c]
+        holders = np.repeat(np.arange(cliques.budget.size), cliques.size)[cliques.edge == c]
         assert full[s, holders].any()
 
 
