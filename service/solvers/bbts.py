@@ -18,6 +18,7 @@ import time
 import numpy as np
 
 from service.solvers.fcfs import fcfs_priorities
+from service.solvers.pace import Pace
 from service.solvers.registry import SolveContext, SolverOutput, register
 
 __all__ = ["BATCH", "LEAVES", "bbts"]
@@ -39,7 +40,7 @@ FIRST_MOVES = 256  # moves of the first step, which times the next
 def bbts(ctx: SolveContext) -> SolverOutput | None:
     """Cheapest of the first ``LEAVES`` valid assignments, within the request's time limit
     (None where not even the first was reached in it: the dispatcher falls back)."""
-    deadline = time.perf_counter() + ctx.time_limit_s
+    pace = Pace(time.perf_counter() + ctx.time_limit_s, time.perf_counter)
     problem = ctx.problem
     ranks, scores = fcfs_priorities(problem)
     order = np.lexsort((np.arange(problem.n_conflicts), -scores))  # earliest conflict first
@@ -49,7 +50,7 @@ def bbts(ctx: SolveContext) -> SolverOutput | None:
     search = ctx.orientation.enumerate(order, prefer_a, follow_first=True)
     best, best_cost, seen, moves = None, np.inf, 0, FIRST_MOVES
     while seen < LEAVES and not search.done and moves > 0:
-        began, before = time.perf_counter(), search.moves
+        began, before = pace.clock(), search.moves
         leaves = search.next(min(BATCH, LEAVES - seen), moves)
         if leaves.n_samples > 0:
             seen += leaves.n_samples
@@ -57,10 +58,9 @@ def bbts(ctx: SolveContext) -> SolverOutput | None:
             k = int(np.argmin(costs))
             if costs[k] < best_cost:
                 best, best_cost = leaves.take(k), float(costs[k])
-        now, made = time.perf_counter(), search.moves - before
-        per_move = (now - began) / max(made, 1)
-        fit = int(min(SLICE_S, deadline - now) / per_move) if per_move > 0 else 2 * made
-        moves = min(fit, 2 * max(made, 1))
+        made = search.moves - before
+        pace.record(began, made)
+        moves = min(pace.units(SLICE_S), 2 * max(made, 1))
     if best is None:
         return None
     return SolverOutput(best, samples=seen, detail=f"{seen} assignments enumerated")

@@ -47,6 +47,7 @@ import numpy as np
 from service.core.assignment import Assignments
 from service.core.decode import bids_from_ranks, decode_candidates
 from service.solvers.fcfs import fcfs, fcfs_priorities
+from service.solvers.pace import Pace
 from service.solvers.registry import SolveContext, SolverOutput, register
 
 __all__ = ["CmaesConfig", "cmaes", "cmaes_search"]
@@ -79,7 +80,7 @@ def cmaes_search(
     ctx: SolveContext, cfg: CmaesConfig = CmaesConfig()
 ) -> tuple[Assignments, float, int]:
     """CMA-ES from FCFS -> (best assignment, its cost, points evaluated incl. FCFS)."""
-    deadline = time.perf_counter() + ctx.time_limit_s
+    pace = Pace(time.perf_counter() + ctx.time_limit_s)
     objective, n_nodes = ctx.objective, ctx.problem.n_nodes
     best = fcfs(ctx).assignment
     best_cost = float(ctx.evaluator.evaluate(best).costs[objective][0])
@@ -98,16 +99,16 @@ def cmaes_search(
     # A generation starts only where one as long as the last (twice as long after a
     # restart, whose population doubles) ends in time: at 250 robots one takes 0.2-0.35 s,
     # and 0.5-s requests ran 0.78-0.92 s.
-    generation_s = 0.0
-    while evaluated < cfg.max_evaluations and time.perf_counter() + generation_s < deadline:
+    scale = 1.0
+    while evaluated < cfg.max_evaluations and pace.fits(scale):
         if popsize is not None:
             options["popsize"] = popsize
         options["maxfevals"] = cfg.max_evaluations - evaluated
         es = cma.CMAEvolutionStrategy(best_x, cfg.sigma0, options)
         if es.stop():  # nothing left to run (never expected: maxfevals > 0)
             break
-        while not es.stop() and time.perf_counter() + generation_s < deadline:
-            began = time.perf_counter()
+        while not es.stop() and pace.fits(scale):
+            began = pace.clock()
             solutions = es.ask()
             x = np.asarray(solutions)  # (P, V + M)
             log_factor = np.clip(x[:, :n_nodes], -LOG_BID_LIMIT, LOG_BID_LIMIT)  # (P, V)
@@ -122,9 +123,10 @@ def cmaes_search(
             fitness = costs.reshape(-1, len(solutions)).min(axis=0)  # (P,) rows k, k+P share x_k
             es.tell(solutions, fitness.tolist())
             evaluated += len(solutions)
-            generation_s = time.perf_counter() - began
+            pace.record(began)
+            scale = 1.0
         popsize = 2 * es.popsize  # IPOP: each restart doubles the population
-        generation_s *= 2
+        scale = 2.0
     return best, best_cost, evaluated
 
 

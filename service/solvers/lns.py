@@ -92,6 +92,7 @@ from service.solvers.exact import (
     search,
     time_slots,
 )
+from service.solvers.pace import Pace
 from service.solvers.registry import SolveContext, SolverOutput, register
 from service.solvers.tabu import plain_start
 
@@ -567,21 +568,22 @@ def lns_search(
     n_robots = ctx.problem.n_robots
     involved = np.flatnonzero(np.diff(fleet.robot_conflicts[0]))  # robots in a conflict
     best, current = start, _Incumbent.start(ctx, fleet, start)
-    sizes, steps, build_s = _Sizes(n_robots, converge, robots), 0, 0.0
+    sizes, steps = _Sizes(n_robots, converge, robots), 0
+    pace = Pace(deadline, time.monotonic)  # steps: building a sub-problem
     # Each running sub-problem and the incumbent it was built on.
     running: dict[Future[_Solved | None], tuple[_Neighbourhood, _Incumbent]] = {}
     with ThreadPoolExecutor(max_workers=ctx.workers) as pool:
         while True:
-            while len(running) < ctx.workers and deadline - time.monotonic() > MIN_STEP_S + build_s:
+            while len(running) < ctx.workers and pace.fits(margin_s=MIN_STEP_S):
                 busy = _in_flight(running.values(), n_robots)
                 count = None if busy.all() else sizes.next()
                 if count is None:
                     break
-                began = time.monotonic()
+                began = pace.clock()
                 picked = fleet.pick(rng, current, count, busy)
                 neighbourhood = _Neighbourhood(ctx, fleet, picked, current)
-                build_s = time.monotonic() - began
-                left = deadline - time.monotonic()
+                pace.record(began)
+                left = pace.left()
                 if left <= 0:
                     break
                 job = pool.submit(neighbourhood.solve, min(SUB_TIME_S, left), seed + steps)

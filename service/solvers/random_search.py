@@ -32,6 +32,7 @@ import numpy as np
 
 from service.core.assignment import Assignments
 from service.core.decode import decode_candidates
+from service.solvers.pace import Pace
 from service.solvers.registry import SolveContext, SolverOutput, register
 
 __all__ = ["BATCH", "DEFAULT_SAMPLES", "random_search"]
@@ -52,23 +53,22 @@ def _best_of(ctx: SolveContext, bids: np.ndarray, scores: np.ndarray) -> tuple[A
 @register("random")
 def random_search(ctx: SolveContext) -> SolverOutput:
     """The cheapest of ``ctx.samples`` random decodes; ``samples`` = rows evaluated."""
-    deadline = time.perf_counter() + ctx.time_limit_s
+    pace = Pace(time.perf_counter() + ctx.time_limit_s)
     rng = np.random.default_rng(ctx.seed)
     total = ctx.samples or DEFAULT_SAMPLES
-    best, best_cost, evaluated, per_row = None, np.inf, 0, 0.0
+    best, best_cost, evaluated = None, np.inf, 0
     while evaluated < total:
         size = min(BATCH, total - evaluated)
         bids = 1.0 - rng.random((size, ctx.problem.n_nodes))  # (B, V) in (0, 1]
         scores = rng.random((size, ctx.problem.n_conflicts))  # (B, M) in [0, 1)
         done = 0
         while done < size:
-            fit = 1 if best is None else int((deadline - time.perf_counter()) / per_row)
-            chunk = min(size - done, fit)
+            chunk = min(size - done, 1 if best is None else pace.units())
             if chunk < 1:
                 return SolverOutput(best, samples=evaluated)
-            began = time.perf_counter()
+            began = pace.clock()
             candidate, cost = _best_of(ctx, bids[done : done + chunk], scores[done : done + chunk])
-            per_row = max((time.perf_counter() - began) / chunk, 1e-9)
+            pace.record(began, chunk)
             if cost < best_cost:
                 best, best_cost = candidate, cost
             done += chunk
