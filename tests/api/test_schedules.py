@@ -123,3 +123,37 @@ def test_a_long_robot_among_many_stays_within_the_memory_bound() -> None:
     measured = json.loads(run.stdout)
     assert measured["solver"] == "gnn_vae"
     assert measured["grown_mb"] < PEAK_GROWTH_MB, measured
+
+
+async def test_the_answer_is_encoded_in_the_worker_thread_as_fastapi_would(
+    client: httpx.AsyncClient, tiny: dict[str, Any], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The JSON body is made where the solve ran (not in the event loop, where a 250-robot
+    answer blocked every other request for ~0.1 s), and it is what FastAPI's own encoding
+    of the answer against the response model gives."""
+    import threading
+
+    from fastapi.encoders import jsonable_encoder
+
+    from service.api.routes import schedules
+
+    made: list[tuple[str, Any]] = []
+    with_json = schedules.with_json
+
+    def spied(work: Any) -> Any:
+        encode = with_json(work)
+
+        def run() -> Any:
+            answer, content = encode()
+            made.append((threading.current_thread().name, answer))
+            return answer, content
+
+        return run
+
+    monkeypatch.setattr(schedules, "with_json", spied)
+    loop_thread = threading.current_thread().name
+    response = await post_json(client, tiny)
+    assert response.status_code == 200 and response.headers["content-type"] == "application/json"
+    [(thread, answer)] = made
+    assert thread != loop_thread
+    assert response.json() == jsonable_encoder(answer, by_alias=True)
