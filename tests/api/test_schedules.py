@@ -135,10 +135,11 @@ async def test_the_answer_is_encoded_in_the_worker_thread_as_fastapi_would(
 
     from fastapi.encoders import jsonable_encoder
 
+    from service.api import encoding
     from service.api.routes import schedules
 
     made: list[tuple[str, Any]] = []
-    with_json = schedules.with_json
+    with_json = encoding.with_json
 
     def spied(work: Any) -> Any:
         encode = with_json(work)
@@ -157,3 +158,29 @@ async def test_the_answer_is_encoded_in_the_worker_thread_as_fastapi_would(
     [(thread, answer)] = made
     assert thread != loop_thread
     assert response.json() == jsonable_encoder(answer, by_alias=True)
+
+
+async def test_the_paths_routes_answer_what_their_models_encode(client: httpx.AsyncClient) -> None:
+    """``/v1/coordination-graphs`` and ``/v1/simulations`` send the JSON their answer models
+    give (encoded in the worker thread, as ``/v1/schedules``): what FastAPI's own encoding
+    of the same answers gives."""
+    from pathlib import Path
+
+    from fastapi.encoders import jsonable_encoder
+
+    from service.core.path_schemas import PathsRequest, SimulationRequest
+    from service.geometry.graph import GeometrySettings
+    from service.motion.plan import coordination_graph
+    from service.simulation.simulate import simulate
+
+    examples = Path(__file__).resolve().parents[2] / "schemas" / "examples" / "paths"
+    paths = json.loads((examples / "wh_two_lane_12.json").read_text())
+    graph = await client.post("/v1/coordination-graphs", json=paths)
+    assert graph.status_code == 200 and graph.headers["content-type"] == "application/json"
+    expected = coordination_graph(PathsRequest.model_validate(paths), GeometrySettings())
+    assert graph.json() == jsonable_encoder(expected, by_alias=True)
+    answer = (await post_json(client, paths)).json()
+    body = {"robots": paths["robots"], "dependencies": answer["dependencies"]}
+    run = await client.post("/v1/simulations", json=body)
+    assert run.status_code == 200, run.text
+    assert run.json() == jsonable_encoder(simulate(SimulationRequest.model_validate(body)))

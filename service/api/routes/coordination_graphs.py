@@ -4,10 +4,11 @@ from __future__ import annotations
 
 from functools import partial
 
-from fastapi import APIRouter, Depends
+from fastapi import APIRouter, Depends, Response
 
 from service.api.body_limit import BodyLimitRoute
 from service.api.deps import RuntimeDep, SettingsDep, require_token
+from service.api.encoding import json_response, with_json
 from service.api.paths import check_path_caps, geometry_settings, run_paths_work
 from service.core.path_schemas import CoordinationGraphResponse, PathsRequest
 from service.motion.plan import coordination_graph
@@ -27,7 +28,7 @@ router = APIRouter(
 )
 async def create_coordination_graph(
     body: PathsRequest, settings: SettingsDep, runtime: RuntimeDep
-) -> CoordinationGraphResponse:
+) -> Response:
     """Derive the graph of ``body`` (paths form): nodes, conflicts, densities, fixed orders.
 
     ``graph`` is a valid graph-form body of ``POST /v1/schedules`` (null when no two
@@ -35,4 +36,5 @@ async def create_coordination_graph(
     """
     check_path_caps(body.robots, settings)
     work = partial(coordination_graph, body, geometry_settings(settings))
-    return await run_paths_work(work, runtime.limiter)
+    _, content = await run_paths_work(with_json(work), runtime.limiter)
+    return json_response(content)

@@ -2,15 +2,15 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from functools import partial
-from typing import Annotated, TypeVar
+from typing import Annotated
 
 from fastapi import APIRouter, Depends, Response
-from pydantic import BaseModel, Discriminator, Tag
+from pydantic import Discriminator, Tag
 
 from service.api.body_limit import BodyLimitRoute
 from service.api.deps import MetricsDep, ReadyRuntimeDep, RecordDep, SettingsDep, require_token
+from service.api.encoding import json_response, with_json
 from service.api.errors import TooLarge
 from service.api.metrics import Metrics
 from service.api.paths import check_path_caps, geometry_settings, run_paths_work
@@ -23,8 +23,6 @@ from service.settings import Settings
 from service.solvers.dispatch import dispatch
 
 __all__ = ["router"]
-
-Answer = TypeVar("Answer", bound=BaseModel)
 
 router = APIRouter(
     prefix="/v1",
@@ -106,29 +104,6 @@ async def schedule_paths(
     metrics.observe_solve(response)
     note_answer(record, response)
     return json_response(content)
-
-
-def with_json(work: Callable[[], Answer]) -> Callable[[], tuple[Answer, bytes]]:
-    """``work``, then its answer's JSON body, both in the solve pool's worker thread.
-
-    Left to FastAPI, a 250-robot answer was validated against the response model and
-    encoded in the event loop (~0.11 s, and parsing the body another ~0.15 s), where every
-    other request's I/O waited: tiny requests beside back-to-back 250-robot ones had a
-    p95 of 0.21 s through HTTP, 24 ms in-process (session 31). The model's own JSON
-    encoder takes 0.02 s for the same answer.
-    """
-
-    def run() -> tuple[Answer, bytes]:
-        answer = work()
-        return answer, answer.model_dump_json(by_alias=True).encode()
-
-    return run
-
-
-def json_response(content: bytes) -> Response:
-    """An already encoded answer, sent as it is (FastAPI neither validates nor re-encodes
-    a :class:`Response`; the route's ``response_model`` still documents it)."""
-    return Response(content=content, media_type="application/json")
 
 
 def note_problem(record: RequestRecord, body: ScheduleRequest) -> None:

@@ -4,10 +4,11 @@ from __future__ import annotations
 
 from functools import partial
 
-from fastapi import APIRouter, Depends
+from fastapi import APIRouter, Depends, Response
 
 from service.api.body_limit import BodyLimitRoute
 from service.api.deps import RuntimeDep, SettingsDep, require_token
+from service.api.encoding import json_response, with_json
 from service.api.errors import TooLarge
 from service.api.paths import check_path_caps, run_paths_work
 from service.core.path_schemas import SimulationRequest, SimulationResponse
@@ -27,7 +28,7 @@ router = APIRouter(
 )
 async def create_simulation(
     body: SimulationRequest, settings: SettingsDep, runtime: RuntimeDep
-) -> SimulationResponse:
+) -> Response:
     """Run ``body`` and report clearance, overlaps, deadlocks and completion times.
 
     With ``trajectories``: play them back. With ``dependencies`` (a paths-form
@@ -43,4 +44,5 @@ async def create_simulation(
             f"{items} waypoints, dependencies or disturbances exceed "
             f"max_total_path_points ({settings.max_total_path_points})"
         )
-    return await run_paths_work(partial(simulate, body), runtime.limiter)
+    _, content = await run_paths_work(with_json(partial(simulate, body)), runtime.limiter)
+    return json_response(content)
