@@ -160,7 +160,6 @@ class _Fleet:
     grid: Evaluator  # least delays of the grid-rounded problem
     held: np.ndarray  # (E+1,) bool events in the objective: their delays bound the latest
     delay_weight: np.ndarray  # (E,) int weight of each event's delay in avg_delay
-    binding: np.ndarray  # (Q,) bool cliques whose budget can bind
     domains: tuple[np.ndarray, ...]  # (M,) each: literal_domains' a_lo, a_hi, f_lo, f_hi
     slots: Slots  # (S,) the time constraints of every live conflict
     slot_robots: np.ndarray  # (S, 2) the robot that waits in each slot, the one it waits for
@@ -191,7 +190,6 @@ class _Fleet:
             grid,
             grid.objective_weights(ctx.objective) > 0,
             delay_weights(p),
-            ctx.cliques.binding(),
             literal_domains(p, ctx.cliques.forbidden()),
             slots,
             np.stack([waiter, conf_robots[slots.conflict].sum(axis=1) - waiter], axis=1),
@@ -397,11 +395,12 @@ class _Neighbourhood:
         more of its freed conflicts may be following-type than that: on two-lane
         warehouses of 250 robots two thirds of the cliques a step touches (half the terms)
         have room for all of them."""
-        cliques, graph = ctx.cliques, ctx.orientation
-        clique, conflict = gather(graph.cq_start, graph.cq_clique, self.conflicts)  # (N,) pairs
+        cliques = ctx.cliques
+        # (N,) pairs of a freed conflict and a binding clique holding it
+        clique, conflict = gather(*cliques.binding_by_conflict, self.conflicts)
         _, _, _, f_hi = fleet.domains  # (M,) each; f_hi 0: never following-type
-        # Others: forbidden (see literal_domains), never binding, or never following-type.
-        kept = fleet.binding[clique] & (f_hi[conflict] > 0)
+        # Others: forbidden (see literal_domains) or never following-type.
+        kept = f_hi[conflict] > 0
         order = np.argsort(clique[kept], kind="stable")
         clique, conflict = clique[kept][order], conflict[kept][order]
         touched, first = np.unique(clique, return_index=True)  # (T,)
