@@ -41,6 +41,7 @@ from service.geometry.graph import CoordinationGraph, GeometrySettings, build_gr
 from service.geometry.paths import RobotPath
 from service.motion.dependencies import Decision, dependency_plan
 from service.motion.progress import progress_at, state_of
+from service.motion.reserve import MotionReserve, work_units
 from service.motion.trajectories import departure_times, realized_costs, trajectories
 from service.scenarios.world import World
 from service.simulation.clearance import Clearance, Trajectory, check_clearance
@@ -55,13 +56,13 @@ from service.simulation.executor import (
 from service.simulation.simulate import plan_to_wire
 from service.solvers.dispatch import DispatchPolicy, InvalidAnswerError, dispatch_problem
 
-__all__ = ["MOTION_SHARE", "coordination_graph", "derived_request", "plan_paths"]
+__all__ = ["MOTION_RESERVE", "coordination_graph", "derived_request", "plan_paths"]
 
 log = logging.getLogger(__name__)
 
-# Share of the request's time limit kept for execution and the clearance check after the
-# solve (measured: ~0.1-0.3 s at 250 robots, docs/paths.md), at least MIN_SOLVE_S to solve.
-MOTION_SHARE = 0.1
+# The time kept after the solve for execution, the clearance check and the answer, learned
+# from this process's answers (service/motion/reserve.py); at least MIN_SOLVE_S to solve.
+MOTION_RESERVE = MotionReserve()
 MIN_SOLVE_S = 0.05
 
 
@@ -118,14 +119,16 @@ def plan_paths(
     geometry: GeometrySettings,
     *,
     deadline: float | None = None,
+    reserve: MotionReserve = MOTION_RESERVE,
 ) -> PathsScheduleResponse:
     """Schedule ``request`` and return trajectories that never collide.
 
     Args:
         deadline: ``time.monotonic()`` by which the answer is due (the request's arrival
             plus its time limit); default: the time limit from now. The solve gets what
-            is left of it after the geometry, less MOTION_SHARE of the time limit kept
-            for execution and the clearance check.
+            is left of it after the geometry, less what ``reserve`` keeps for motion
+            (execution, the clearance check, the answer), which then learns what motion
+            took.
 
     Raises:
         ProblemError: bad geometry (fixed paths leave no collision-free order).
@@ -133,16 +136,17 @@ def plan_paths(
         InvalidAnswerError: not even the all-exclusive plan executed cleanly (a bug).
     """
     start = time.perf_counter()
-    limit = request.options.time_limit_s or policy.default_time_limit_s
-    due = time.monotonic() + limit if deadline is None else deadline
+    if deadline is None:
+        deadline = time.monotonic() + (request.options.time_limit_s or policy.default_time_limit_s)
     graph = derive(request, geometry)
     state = None if request.progress is None else state_of(graph.paths, request.progress)
     problem = graph.problem()
     progress = None if state is None or problem is None else progress_at(graph, state)
     graph_done = time.perf_counter()
     answer: ScheduleResponse | None = None
+    units = 0 if problem is None else work_units(problem)
     if problem is not None:
-        solve_due = max(due - MOTION_SHARE * limit, time.monotonic() + MIN_SOLVE_S)
+        solve_due = max(deadline - reserve.seconds(units), time.monotonic() + MIN_SOLVE_S)
         answer = dispatch_problem(
             problem,
             request,
@@ -161,6 +165,7 @@ def plan_paths(
         solve_s=solve_done - graph_done,
         motion_s=time.perf_counter() - solve_done,
     )
+    reserve.observe(units, response.timings.motion_s)
     return response
 
 
