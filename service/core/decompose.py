@@ -49,8 +49,11 @@ def parts(problem: Problem) -> list[Part]:
     if np.count_nonzero(sizes) <= 1:  # one component: the problem itself, not a copy
         return [Part(problem, np.arange(problem.n_conflicts))] if problem.n_conflicts else []
     order = np.argsort(-sizes, kind="stable")
+    limit_label = _limit_labels(problem, label)  # (L,)
     return [
-        _restrict(problem, label == c, np.flatnonzero(conf_label == c)) for c in order if sizes[c]
+        _restrict(problem, label == c, np.flatnonzero(conf_label == c), limit_label == c)
+        for c in order
+        if sizes[c]
     ]
 
 
@@ -69,17 +72,34 @@ def _renumber(mask: np.ndarray) -> np.ndarray:
     return np.where(mask, np.cumsum(mask) - 1, -1)
 
 
-def _restrict(problem: Problem, robots: np.ndarray, conflicts: np.ndarray) -> Part:
-    """The sub-problem of the robots in mask ``robots`` (R,) and their ``conflicts`` (M_k,)."""
+def _limit_labels(problem: Problem, label: np.ndarray) -> np.ndarray:
+    """(L,) the component (of the robots' ``label`` (R,)) each explicit density limit lies
+    in, -1 for one spanning several (none does: a limit's nodes, at least two, are
+    pairwise in conflict). One pass over every limit's nodes, where a test of each limit
+    against each component took 0.6 s for 46,500 limits in 4 components."""
+    limits = problem.density_limits
+    if not limits:
+        return np.zeros(0, dtype=np.int64)
+    sizes = np.fromiter((lim.nodes.size for lim in limits), dtype=np.int64, count=len(limits))
+    node_label = label[problem.node_robot[np.concatenate([lim.nodes for lim in limits])]]
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])  # (L,)
+    low = np.minimum.reduceat(node_label, starts)
+    return np.where(low == np.maximum.reduceat(node_label, starts), low, -1)
+
+
+def _restrict(
+    problem: Problem, robots: np.ndarray, conflicts: np.ndarray, limits_inside: np.ndarray
+) -> Part:
+    """The sub-problem of the robots in mask ``robots`` (R,), their ``conflicts`` (M_k,)
+    and the density limits in mask ``limits_inside`` (L,)."""
     p = problem
     nodes = robots[p.node_robot]  # (V,) bool
     tps = robots[p.tp_robot]  # (P,) bool
     new_robot, new_node, new_tp = _renumber(robots), _renumber(nodes), _renumber(tps)
     node_ids = tuple(np.asarray(p.node_ids, dtype=object)[nodes].tolist())
     limits = tuple(
-        DensityLimit(new_node[lim.nodes], lim.max_robots)
-        for lim in p.density_limits
-        if nodes[lim.nodes].all()
+        DensityLimit(new_node[p.density_limits[k].nodes], p.density_limits[k].max_robots)
+        for k in np.flatnonzero(limits_inside).tolist()
     )
     counts = np.diff(p.robot_start)[robots]  # (R_k,) nodes per robot
     tp_counts = np.diff(p.tp_start)[robots]  # (R_k,)

@@ -110,6 +110,29 @@ def test_components_evaluate_like_the_whole(seed: int) -> None:
     assert np.array_equal(joined.following, whole.following)
 
 
+@pytest.mark.parametrize("seed", range(40))
+def test_each_component_keeps_exactly_the_density_limits_inside_it(seed: int) -> None:
+    req = _side_by_side(seed)
+    assert req is not None
+    problem = problem_from_request(ScheduleRequest.model_validate(req))
+    pieces = parts(problem)
+    node_ids = np.asarray(problem.node_ids, dtype=object)
+    every = sorted(
+        (tuple(node_ids[lim.nodes].tolist()), lim.max_robots) for lim in problem.density_limits
+    )
+    kept = []
+    for part in pieces:
+        inside = set(part.problem.node_ids)
+        sub_ids = np.asarray(part.problem.node_ids, dtype=object)
+        got = sorted(
+            (tuple(sub_ids[lim.nodes].tolist()), lim.max_robots)
+            for lim in part.problem.density_limits
+        )
+        assert got == [lim for lim in every if set(lim[0]) <= inside]
+        kept += got
+    assert sorted(kept) == every  # every limit lies inside one component
+
+
 @pytest.mark.parametrize("name", ["wh_50", "geo_dense_25"])
 def test_auto_uses_and_honours_its_budget(name: str) -> None:
     """A problem CP-SAT does not prove in 1 s: auto answers within 10 % + 0.15 s."""
