@@ -18,6 +18,7 @@ It is deliberately slow and simple: it is the thing the fast code is compared to
 from __future__ import annotations
 
 import itertools
+import json
 from dataclasses import dataclass
 from typing import Any
 
@@ -268,6 +269,39 @@ def tiny_request(seed: int, objective: str = "avg_completion") -> dict[str, Any]
         groups = _largest_clique(reference_problem(req))
         req["density_limits"] = [{"nodes": groups, "max_robots": int(rng.integers(1, 3))}]
     return req
+
+
+def _renamed(req: dict[str, Any], prefix: str) -> dict[str, Any]:
+    """``req`` with every robot and node id prefixed (to put two problems side by side)."""
+    text = json.dumps({k: req[k] for k in ("robots", "conflicts", "density_limits") if k in req})
+    robots = json.loads(text)["robots"]
+    for r in robots:
+        r["id"] = prefix + r["id"]
+        for n in r["nodes"]:
+            n["id"] = prefix + n["id"]
+    conflicts = json.loads(text)["conflicts"]
+    for c in conflicts:
+        c["a"], c["b"] = prefix + c["a"], prefix + c["b"]
+    limits = [
+        {**lim, "nodes": [prefix + n for n in lim["nodes"]]}
+        for lim in json.loads(text).get("density_limits", [])
+    ]
+    return {"robots": robots, "conflicts": conflicts, "density_limits": limits}
+
+
+def side_by_side(seed: int) -> dict[str, Any] | None:
+    """Two tiny problems with 1-3 conflicts each, as one request with two components."""
+    found = []
+    for k in range(seed * 50, seed * 50 + 50):
+        req = tiny_request(k)
+        if 1 <= len(req["conflicts"]) <= 3:
+            found.append(req)
+        if len(found) == 2:
+            break
+    if len(found) < 2:
+        return None
+    left, right = _renamed(found[0], "L"), _renamed(found[1], "R")
+    return {key: left[key] + right[key] for key in left}
 
 
 def fix_directions(req: dict[str, Any], seed: int, share: float = 0.5) -> dict[str, Any]:

@@ -26,13 +26,14 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from contextvars import ContextVar
 from dataclasses import dataclass
+from itertools import pairwise
 
 import numba
 import numpy as np
 from numba import types
 from numba.typed import List
 
-from service.core.csr import csr, select, transpose
+from service.core.csr import csr, gather, select, transpose
 from service.core.lazy import cached_property
 from service.core.problem import Problem
 
@@ -124,6 +125,34 @@ class Cliques:
         """:attr:`by_conflict` restricted to the :meth:`binding` cliques, the only ones
         whose budget a search must count (same layout)."""
         return select(*self.by_conflict, self.binding())
+
+    def split(self, part: np.ndarray, n_parts: int) -> list[Cliques]:
+        """The cliques of each part of the problem, whose conflicts are those labelled
+        with it in ``part`` (M,) int in 0..n_parts-1, renumbered in ascending order.
+
+        Parts must be unions of components (every clique then lies in one part): each
+        part's cliques are then exactly what :func:`find_cliques` finds on its own
+        problem, in its order, without enumerating again (at 1,000 robots in four
+        components, 0.17 s for the four parts)."""
+        clique_part = part[self.edge[self.start[:-1]]]  # (Q,) every clique holds a conflict
+        order = np.argsort(clique_part, kind="stable")  # (Q,) cliques by part, order kept
+        edge, _ = gather(self.start, self.edge, order)  # (E,) their conflicts, in that order
+        by_conflict = np.argsort(part, kind="stable")  # (M,) conflicts by part, ascending
+        first = np.searchsorted(part[by_conflict], np.arange(n_parts + 1))  # (n_parts+1,)
+        renumber = np.empty(self.n_conflicts, dtype=np.int64)  # (M,) index within its part
+        renumber[by_conflict] = np.arange(self.n_conflicts) - np.repeat(first[:-1], np.diff(first))
+        size = self.size[order]  # (Q,)
+        bounds = np.searchsorted(clique_part[order], np.arange(n_parts + 1))  # cliques by part
+        ends = np.concatenate([[0], np.cumsum(size)])  # (Q+1,) where each clique's edges begin
+        return [
+            Cliques(
+                budget=self.budget[order[lo:hi]],
+                edge=renumber[edge[ends[lo] : ends[hi]]],
+                start=ends[lo : hi + 1] - ends[lo],
+                n_conflicts=int(first[k + 1] - first[k]),
+            )
+            for k, (lo, hi) in enumerate(pairwise(bounds.tolist()))
+        ]
 
     def forbidden(self) -> np.ndarray:
         """(M,) bool: conflicts inside a zero-budget clique, which must be exclusive."""

@@ -62,6 +62,7 @@ from dataclasses import replace
 import numpy as np
 
 from service.core.assignment import Assignments
+from service.core.cliques import Cliques
 from service.core.decompose import DECOMPOSABLE, Part, join, parts
 from service.solvers.exact import build_seconds, improve
 from service.solvers.lns import LNS_OBJECTIVES, LNS_ROBOTS, lns_search
@@ -174,12 +175,16 @@ def auto(ctx: SolveContext) -> SolverOutput:
     if len(pieces) <= 1:
         return _staged(ctx, deadline)
     pieces.sort(key=lambda part: part.problem.n_conflicts)
+    label = np.empty(ctx.problem.n_conflicts, dtype=np.int64)  # (M,) each conflict's part
+    for k, part in enumerate(pieces):
+        label[part.conflicts] = k
+    cliques = ctx.cliques.split(label, len(pieces))
     outputs: list[tuple[Part, SolverOutput]] = []
     left_conflicts = sum(part.problem.n_conflicts for part in pieces)
-    for part in pieces:
+    for part, part_cliques in zip(pieces, cliques, strict=True):
         share = (deadline - time.monotonic()) * part.problem.n_conflicts / left_conflicts
         left_conflicts -= part.problem.n_conflicts
-        sub = _part_context(ctx, part, max(share, 0.0))
+        sub = _part_context(ctx, part, max(share, 0.0), part_cliques)
         outputs.append((part, _staged(sub, time.monotonic() + sub.time_limit_s)))
     optimal = all(out.optimal for _, out in outputs)
     proven = sum(out.optimal for _, out in outputs)
@@ -190,14 +195,17 @@ def auto(ctx: SolveContext) -> SolverOutput:
     )
 
 
-def _part_context(ctx: SolveContext, part: Part, time_limit_s: float) -> SolveContext:
-    """A context for one component, with the warm start cut to its conflicts."""
+def _part_context(
+    ctx: SolveContext, part: Part, time_limit_s: float, cliques: Cliques
+) -> SolveContext:
+    """A context for one component, with the warm start cut to its conflicts and its
+    ``cliques`` (split from the whole problem's, not found again)."""
     warm = ctx.warm
     if warm is not None:
         warm = Assignments(warm.a_first[:, part.conflicts], warm.following[:, part.conflicts])
-    return replace(
-        ctx, problem=part.problem, time_limit_s=time_limit_s, warm=warm, on_solution=None
-    )
+    sub = replace(ctx, problem=part.problem, time_limit_s=time_limit_s, warm=warm, on_solution=None)
+    sub.__dict__["cliques"] = cliques  # the cached property, already known
+    return sub
 
 
 def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:

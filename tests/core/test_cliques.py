@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import json
 from itertools import pairwise
+from pathlib import Path
 from typing import Any
 
 import networkx as nx
@@ -23,11 +25,13 @@ from service.core.cliques import (
     find_cliques,
 )
 from service.core.csr import csr, gather, select, transpose
+from service.core.decompose import parts
 from service.core.problem import Problem, problem_from_request
 from service.core.schemas import ScheduleRequest
 from service.learning.generate import small_problem
-from tests.reference import density_groups, reference_problem, tiny_request
+from tests.reference import density_groups, reference_problem, side_by_side, tiny_request
 
+DATA = Path(__file__).resolve().parents[1] / "data" / "conformance"
 NO_LIMITS = np.array([-1, -1])
 COMPLETE, OVER_INCIDENCES, OVER_CLIQUES = (
     module._COMPLETE,
@@ -315,3 +319,39 @@ def test_find_cliques_names_the_bound_it_exceeds() -> None:
     assert held.value.setting == "max_clique_incidences"
     assert "hold more than 80 conflicts in all (max_clique_incidences)" in str(held.value)
     assert find_cliques(problem).budget.size == 27  # unbounded outside the context
+
+
+def _split_matches_each_part(problem: Problem) -> int:
+    """Asserts that the whole problem's cliques split by component equal those found on each
+    component alone; the number of components."""
+    pieces = parts(problem)
+    label = np.empty(problem.n_conflicts, dtype=np.int64)
+    for k, piece in enumerate(pieces):
+        label[piece.conflicts] = k
+    for piece, got in zip(pieces, find_cliques(problem).split(label, len(pieces)), strict=True):
+        alone = find_cliques(piece.problem)
+        assert got.n_conflicts == alone.n_conflicts == piece.problem.n_conflicts
+        for name in ("budget", "edge", "start"):
+            assert np.array_equal(getattr(got, name), getattr(alone, name)), name
+    return len(pieces)
+
+
+@pytest.mark.parametrize("seed", range(30))
+def test_cliques_split_by_component_equal_each_component_s_own(seed: int) -> None:
+    req = side_by_side(seed)
+    assert req is not None
+    assert _split_matches_each_part(_problem(req)) >= 2
+
+
+@pytest.mark.parametrize("name", ["wh_100", "wh_50"])
+def test_cliques_split_on_warehouses_of_several_components(name: str) -> None:
+    lines = (DATA / f"{name}.jsonl").read_text().splitlines()
+    counts = [_split_matches_each_part(_problem(json.loads(line)["request"])) for line in lines]
+    assert max(counts) >= 2
+
+
+def test_cliques_split_into_parts_without_cliques() -> None:
+    whole = Cliques(np.array([0]), np.array([0, 2]), np.array([0, 2]), 4)  # one clique
+    first, second = whole.split(np.array([0, 1, 0, 1]), 2)
+    assert np.array_equal(first.edge, [0, 1]) and first.n_conflicts == 2
+    assert second.size.size == 0 and second.n_conflicts == 2 and np.array_equal(second.start, [0])

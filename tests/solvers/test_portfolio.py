@@ -26,48 +26,15 @@ from service.core.schemas import OBJECTIVES, ScheduleRequest
 from service.solvers import lns
 from service.solvers.dispatch import DispatchPolicy, dispatch
 from service.solvers.registry import SolveContext
-from tests.reference import feasible_assignments, reference_problem, tiny_request
+from tests.reference import feasible_assignments, reference_problem, side_by_side
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "conformance"
-
-
-def _renamed(req: dict[str, Any], prefix: str) -> dict[str, Any]:
-    """``req`` with every robot and node id prefixed (to put two problems side by side)."""
-    text = json.dumps({k: req[k] for k in ("robots", "conflicts", "density_limits") if k in req})
-    robots = json.loads(text)["robots"]
-    for r in robots:
-        r["id"] = prefix + r["id"]
-        for n in r["nodes"]:
-            n["id"] = prefix + n["id"]
-    conflicts = json.loads(text)["conflicts"]
-    for c in conflicts:
-        c["a"], c["b"] = prefix + c["a"], prefix + c["b"]
-    limits = [
-        {**lim, "nodes": [prefix + n for n in lim["nodes"]]}
-        for lim in json.loads(text).get("density_limits", [])
-    ]
-    return {"robots": robots, "conflicts": conflicts, "density_limits": limits}
-
-
-def _side_by_side(seed: int) -> dict[str, Any] | None:
-    """Two tiny problems with 1-3 conflicts each, as one request with two components."""
-    found = []
-    for k in range(seed * 50, seed * 50 + 50):
-        req = tiny_request(k)
-        if 1 <= len(req["conflicts"]) <= 3:
-            found.append(req)
-        if len(found) == 2:
-            break
-    if len(found) < 2:
-        return None
-    left, right = _renamed(found[0], "L"), _renamed(found[1], "R")
-    return {key: left[key] + right[key] for key in left}
 
 
 @pytest.mark.parametrize("seed", range(12))
 @pytest.mark.parametrize("objective", OBJECTIVES)
 def test_auto_reaches_brute_force_on_independent_components(seed: int, objective: str) -> None:
-    req = _side_by_side(seed)
+    req = side_by_side(seed)
     assert req is not None
     ref = reference_problem(req)
     best = min(c.costs[objective] for c in feasible_assignments(ref))
@@ -82,7 +49,7 @@ def test_auto_reaches_brute_force_on_independent_components(seed: int, objective
 
 @pytest.mark.parametrize("seed", range(10))
 def test_components_evaluate_like_the_whole(seed: int) -> None:
-    req = _side_by_side(seed)
+    req = side_by_side(seed)
     assert req is not None
     problem = problem_from_request(ScheduleRequest.model_validate(req))
     ctx = SolveContext(problem, "avg_completion", 1.0)
@@ -112,7 +79,7 @@ def test_components_evaluate_like_the_whole(seed: int) -> None:
 
 @pytest.mark.parametrize("seed", range(40))
 def test_each_component_keeps_exactly_the_density_limits_inside_it(seed: int) -> None:
-    req = _side_by_side(seed)
+    req = side_by_side(seed)
     assert req is not None
     problem = problem_from_request(ScheduleRequest.model_validate(req))
     pieces = parts(problem)
