@@ -65,10 +65,11 @@ def take_turns(
     until ``deadline`` (monotonic); each turn's searches get the next seed."""
     best, turns, share = start, 0, config.priority_share
     turn_s = min(config.turn_s, config.turn_share * (deadline - time.monotonic()))
+    cooling = (time.monotonic(), deadline)  # re-insertion cools over all its turns
     while time.monotonic() < deadline:
         began, before = time.monotonic(), cost
         found = reinsert_search(
-            ctx, best, min(deadline, began + (1 - share) * turn_s), seed + turns
+            ctx, best, min(deadline, began + (1 - share) * turn_s), seed + turns, cooling=cooling
         )
         best, cost = found.best, found.cost
         middle, between = time.monotonic(), cost

@@ -175,15 +175,18 @@ def test_a_lone_robot_never_finishes_later_than_it_did(family: str, seed: int, r
     seed=st.integers(0, 10_000),
     robots=st.integers(3, 30),
     objective=st.sampled_from(OBJECTIVES),
+    anneal=st.sampled_from([0.0, 0.05]),
 )
 def test_the_search_only_improves_and_is_deterministic(
-    family: str, seed: int, robots: int, objective: str
+    family: str, seed: int, robots: int, objective: str, anneal: float
 ) -> None:
+    """The answer returned is never dearer than the start (annealed or not), valid, costs
+    what it says, and the same for the same seed when the steps are capped."""
     ctx = _context(_request(family, seed, robots), objective)
     if ctx.problem.n_conflicts == 0:
         return
     start = plain_start(ctx)
-    config = reinsert.ReinsertConfig(robots=3)
+    config = reinsert.ReinsertConfig(robots=3, anneal=anneal)
     runs = []
     for _ in range(2):
         runs.append(reinsert.reinsert_search(ctx, start, np.inf, seed, config, max_steps=30))
@@ -196,6 +199,33 @@ def test_the_search_only_improves_and_is_deterministic(
     checks = check(ctx.problem, ctx.cliques, first.best)
     assert checks.acyclic[0] and checks.density[0] and checks.forced[0]
     assert first.cost == float(ctx.evaluator.evaluate(first.best).costs[objective][0])
+
+
+def test_annealing_keeps_dearer_answers_and_returns_the_cheapest_seen(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    line = (DATA / "wh_25.jsonl").read_text().splitlines()[0]
+    ctx = _context(json.loads(line)["request"], "avg_completion")
+    start = plain_start(ctx)
+    start_cost = float(ctx.evaluator.evaluate(start).costs["avg_completion"][0])
+    kept: list[tuple[float, float]] = []  # (cost of the answer it replaced, its own)
+    original = reinsert._kept
+
+    def spy(ctx: SolveContext, current: reinsert._Incumbent, *args: object) -> object:
+        out = original(ctx, current, *args)
+        if out is not None:
+            kept.append((current.cost, out.cost))
+        return out
+
+    monkeypatch.setattr(reinsert, "_kept", spy)
+    config = reinsert.ReinsertConfig(robots=3, anneal=0.2)
+    found = reinsert.reinsert_search(ctx, start, np.inf, 0, config, max_steps=200)
+    assert any(new > old for old, new in kept)  # a dearer answer kept while warm
+    assert found.cost == min([start_cost] + [new for _, new in kept])
+    assert found.cost == float(ctx.evaluator.evaluate(found.best).costs["avg_completion"][0])
+    kept.clear()
+    reinsert.reinsert_search(ctx, start, np.inf, 0, replace(config, anneal=0.0), max_steps=200)
+    assert kept and all(new < old for old, new in kept)  # cold: only cheaper ones
 
 
 def test_the_search_stops_at_its_deadline() -> None:
