@@ -115,8 +115,8 @@ class ReinsertConfig:
     whole_fleet_plateau: int | None = None
     # Annealed acceptance: a repair costing more than the current answer is kept too, with
     # probability exp(-excess / T), T falling linearly from ``anneal`` x the best cost
-    # to 0 at the deadline (0: only cheaper repairs are kept); the best answer seen is
-    # what the search returns. See ANNEAL.
+    # to 0 over the search's cooling span (0: only cheaper repairs are kept); the best
+    # answer seen is what the search returns. See ANNEAL.
     anneal: float = ANNEAL
 
 
