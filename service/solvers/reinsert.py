@@ -468,13 +468,14 @@ class _Incumbent:
         answer: Assignments,
         evaluation: Evaluation,
         pos: np.ndarray,
-        weight: np.ndarray,
+        latest: np.ndarray,
         counts: np.ndarray | None = None,
     ) -> _Incumbent:
         """``answer`` with its evaluation, a topological order ``pos`` (V,) of its node
-        graph (re-ranked to 0..V-1: repairs split gaps, which would shrink without end)
-        and its following-type ``counts`` (Q,) per clique (None: counted here);
-        ``weight`` (E+1,) as :meth:`~service.core.evaluate.Evaluator.objective_weights`."""
+        graph (re-ranked to 0..V-1: repairs split gaps, which would shrink without end),
+        its ``latest`` delays (E+1,) (:meth:`~service.core.evaluate.Evaluator.latest_delays`
+        holding the objective's events) and its following-type ``counts`` (Q,) per clique
+        (None: counted here)."""
         if counts is None:
             counts = ctx.cliques.following_counts(answer.following)[0]
         return cls(
@@ -482,7 +483,7 @@ class _Incumbent:
             answer.following[0],
             float(evaluation.costs[ctx.objective][0]),
             evaluation.event_delay[0],
-            ctx.evaluator.latest_delays(answer, evaluation, weight > 0),
+            latest,
             np.argsort(np.argsort(pos, kind="stable")).astype(np.float64),
             counts,
             evaluation.completion[0] - ctx.problem.free_time(),
@@ -511,10 +512,12 @@ def reinsert_search(
     weight = ctx.evaluator.objective_weights(ctx.objective)
     budget = ctx.cliques.budget.astype(np.int64)
     rng = np.random.default_rng(seed)
+    held = weight > 0  # (E+1,) the objective's events
     rank = ctx.orientation.topological_rank(start.a_first[0])
-    if rank is None:
+    evaluation, latest = ctx.evaluator.evaluate_with_latest(start, held)
+    if rank is None or latest is None:
         raise ValueError("the answer to search from closes a cycle")
-    current = _Incumbent.of(ctx, start, ctx.evaluator.evaluate(start), rank, weight)
+    current = _Incumbent.of(ctx, start, evaluation, rank, latest)
     best, best_cost = start, current.cost
     n_robots, steps = ctx.problem.n_robots, 0
     count, stalled = min(config.robots, n_robots), 0
@@ -539,7 +542,7 @@ def reinsert_search(
         )
         steps += 1
         below = current.cost + _tolerated(config.anneal * best_cost * (1.0 - cooled), rng)
-        kept = None if found is None else _kept(ctx, current, *found, weight, below)
+        kept = None if found is None else _kept(ctx, current, *found, held, below)
         if kept is None or kept.cost >= best_cost:
             stalled += 1
             current = current if kept is None else kept
@@ -728,15 +731,16 @@ def _kept(
     current: _Incumbent,
     found: Assignments,
     pos: np.ndarray,
-    weight: np.ndarray,
+    held: np.ndarray,
     below: float,
 ) -> _Incumbent | None:
-    """``found`` (node positions ``pos`` (V,)) as the new incumbent if the evaluator finds
-    it cheaper than ``below``; None otherwise, and (a guard: repairs exclude both by
-    construction) if ``pos`` is not a topological order of its node graph or a density
-    clique holds more following-type conflicts than its budget."""
-    evaluation = ctx.evaluator.evaluate(found)
-    if not float(evaluation.costs[ctx.objective][0]) < below:
+    """``found`` (node positions ``pos`` (V,)) as the new incumbent, its latest delays
+    holding the ``held`` (E+1,) events, if the evaluator finds it cheaper than ``below``;
+    None otherwise, and (a guard: repairs exclude both by construction) if ``pos`` is
+    not a topological order of its node graph or a density clique holds more
+    following-type conflicts than its budget."""
+    evaluation, latest = ctx.evaluator.evaluate_with_latest(found, held)
+    if latest is None or not float(evaluation.costs[ctx.objective][0]) < below:
         return None
     p, a_first = ctx.problem, found.a_first[0]
     tail = np.where(a_first, p.conf_a, p.conf_b)  # (M,) the node passing first
@@ -747,7 +751,7 @@ def _kept(
     counts = ctx.orientation.recount(current.counts, current.following, found.following[0])
     if (counts > ctx.cliques.budget).any():
         return None
-    return _Incumbent.of(ctx, found, evaluation, pos, weight, counts)
+    return _Incumbent.of(ctx, found, evaluation, pos, latest, counts)
 
 
 @register("reinsert")

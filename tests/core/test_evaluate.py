@@ -443,6 +443,56 @@ def test_latest_delays_are_the_latest_that_keep_the_held_events(seed: int, stitc
             assert (_walk_with_floor(problem, assignment, floor)[held] > least[held] + 0.5).any()
 
 
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 10_000), stitched=st.booleans(), decoded=st.booleans())
+def test_evaluate_with_latest_is_evaluate_and_latest_delays(
+    seed: int, stitched: bool, decoded: bool
+) -> None:
+    """One walk gives what :meth:`evaluate` and :meth:`latest_delays` give apart; an
+    assignment with a cycle (random directions often close one) gets no latest delays
+    and its cyclic evaluation."""
+    request = stitched_problem(seed, 10, 3.0) if stitched else small_problem(seed)
+    problem = _problem(request)
+    ev = Evaluator(problem)
+    if decoded:
+        assignment = _decoded(problem, seed)
+    else:
+        rng = np.random.default_rng(seed)
+        assignment = Assignments.single(
+            rng.random(problem.n_conflicts) < 0.5, rng.random(problem.n_conflicts) < 0.3
+        )
+    held = np.random.default_rng(seed + 1).random(ev.n_events + 1) < 0.5
+    evaluation, latest = ev.evaluate_with_latest(assignment, held)
+    apart = ev.evaluate(assignment)
+    np.testing.assert_array_equal(evaluation.event_delay, apart.event_delay)
+    for objective in apart.costs:
+        np.testing.assert_array_equal(evaluation.costs[objective], apart.costs[objective])
+    if latest is None:
+        assert not decoded
+        with pytest.raises(ValueError, match="cycle"):
+            ev.latest_delays(assignment, apart, held)
+    else:
+        np.testing.assert_array_equal(latest, ev.latest_delays(assignment, apart, held))
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_binding_matches_its_definition(seed: int) -> None:
+    """The compiled loop marks exactly the conflicts whose active slot's constraint holds
+    with equality at a positive wait (the definition, in numpy gathers here)."""
+    problem = _problem(stitched_problem(seed, 12, 3.0) if seed % 2 else small_problem(seed))
+    ev = Evaluator(problem)
+    assignment = _decoded(problem, seed)
+    evaluation = ev.evaluate(assignment)
+    delay, a_first = evaluation.event_delay[0], assignment.a_first[0]
+    slot = 2 * np.arange(a_first.size) + a_first  # (M,)
+    kind = assignment.following[0].astype(np.intp)
+    wait = delay[ev.graph.target[slot]]
+    tol = 1e-9 * max(1.0, float(np.abs(problem.tp_time).max()))
+    tight = np.abs(wait - delay[ev.graph.source[kind, slot]] - ev.graph.offset[kind, slot]) <= tol
+    expected = (wait > tol) & tight & ~problem.realized
+    np.testing.assert_array_equal(ev.binding(assignment, evaluation), expected)
+
+
 def test_latest_delays_refuse_a_cycle() -> None:
     problem = _problem(trap_request())
     ev = Evaluator(problem)

@@ -64,10 +64,10 @@ def _incumbent(ctx: SolveContext) -> reinsert._Incumbent:
     start = plain_start(ctx)
     rank = ctx.orientation.topological_rank(start.a_first[0])
     assert rank is not None
-    evaluation = ctx.evaluator.evaluate(start)
-    return reinsert._Incumbent.of(
-        ctx, start, evaluation, rank, ctx.evaluator.objective_weights(ctx.objective)
-    )
+    held = ctx.evaluator.objective_weights(ctx.objective) > 0
+    evaluation, latest = ctx.evaluator.evaluate_with_latest(start, held)
+    assert latest is not None
+    return reinsert._Incumbent.of(ctx, start, evaluation, rank, latest)
 
 
 @settings(max_examples=60, deadline=None, derandomize=True, suppress_health_check=SLOW)
