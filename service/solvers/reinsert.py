@@ -726,6 +726,23 @@ def _take_room(st: _Static, conflict: int, room: np.ndarray) -> bool:
     return True
 
 
+@numba.njit(cache=True, nogil=True)
+def _ordered(st: _Static, a_first: np.ndarray, pos: np.ndarray) -> bool:
+    """Whether node positions ``pos`` (V,) are a topological order of the node graph of
+    directions ``a_first`` (M,) bool: increasing along every path and from the node
+    passing first to the other at every conflict (a loop: 0.25 ms in numpy at 250
+    robots, re-insertion's guard on every answer it keeps)."""
+    for r in range(st.robot_start.size - 1):
+        for v in range(st.robot_start[r], st.robot_start[r + 1] - 1):
+            if pos[v + 1] <= pos[v]:
+                return False
+    for c in range(a_first.size):
+        first, second = (0, 1) if a_first[c] else (1, 0)
+        if pos[st.conf_nodes[c, first]] >= pos[st.conf_nodes[c, second]]:
+            return False
+    return True
+
+
 def _kept(
     ctx: SolveContext,
     current: _Incumbent,
@@ -742,11 +759,7 @@ def _kept(
     evaluation, latest = ctx.evaluator.evaluate_with_latest(found, held)
     if latest is None or not float(evaluation.costs[ctx.objective][0]) < below:
         return None
-    p, a_first = ctx.problem, found.a_first[0]
-    tail = np.where(a_first, p.conf_a, p.conf_b)  # (M,) the node passing first
-    head = np.where(a_first, p.conf_b, p.conf_a)
-    along = p.node_robot[1:] == p.node_robot[:-1]  # (V-1,) path arcs v -> v+1
-    if (pos[tail] >= pos[head]).any() or (pos[1:][along] <= pos[:-1][along]).any():
+    if not _ordered(_Static.of(ctx), found.a_first[0], pos):
         return None
     counts = ctx.orientation.recount(current.counts, current.following, found.following[0])
     if (counts > ctx.cliques.budget).any():

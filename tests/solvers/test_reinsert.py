@@ -112,12 +112,33 @@ def test_every_repair_is_valid_and_its_times_are_a_schedule_of_it(
     assert checks.acyclic[0] and checks.density[0] and checks.forced[0]
     tail = np.where(a_first, problem.conf_a, problem.conf_b)
     head = np.where(a_first, problem.conf_b, problem.conf_a)
-    assert (pos[tail] < pos[head]).all()
+    assert (pos[tail] < pos[head]).all() and reinsert._ordered(static, a_first, pos)
     mine = _events_of(ctx, order)
     _assert_passages_keep_their_bounds(ctx, found, delay, latest, mine)
     if not slack:
         assert (ctx.evaluator.evaluate(found).event_delay[0] <= delay + 1e-6).all()
     assert cost == pytest.approx(float(weight[mine] @ delay[mine]))
+
+
+@settings(max_examples=40, deadline=None, derandomize=True, suppress_health_check=SLOW)
+@given(family=FAMILIES, seed=st.integers(0, 10_000), robots=st.integers(3, 30))
+def test_ordered_is_a_topological_order_check(family: str, seed: int, robots: int) -> None:
+    """The guard on kept answers accepts exactly the positions increasing along every
+    path and from the first side's node to the second's at every conflict."""
+    ctx = _context(_request(family, seed, robots), "avg_completion")
+    problem, rng = ctx.problem, np.random.default_rng(seed)
+    static = reinsert._Static.of(ctx)
+    for _ in range(5):
+        a_first = rng.random(problem.n_conflicts) < 0.5
+        pos = rng.permutation(problem.n_nodes).astype(np.float64)
+        if rng.random() < 0.5:  # a true order where one exists: every conflict flipped to it
+            rank = ctx.orientation.topological_rank(a_first)
+            pos = pos if rank is None else rank.astype(np.float64)
+        tail = np.where(a_first, problem.conf_a, problem.conf_b)
+        head = np.where(a_first, problem.conf_b, problem.conf_a)
+        along = problem.node_robot[1:] == problem.node_robot[:-1]
+        expected = (pos[tail] < pos[head]).all() and (pos[1:][along] > pos[:-1][along]).all()
+        assert reinsert._ordered(static, a_first, pos) == expected
 
 
 def _assert_passages_keep_their_bounds(
