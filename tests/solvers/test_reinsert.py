@@ -359,3 +359,26 @@ def test_conflicts_are_taken_by_event_in_a_stable_order(events: list[int]) -> No
     event = np.array(events, dtype=np.int64)
     expected = np.argsort(event, kind="stable")
     assert reinsert._by_event(event, 10).tolist() == expected.tolist()
+
+
+@pytest.mark.parametrize(
+    ("robots", "share", "first"), [(30, 1 / 16, 8), (30, 0.5, 15), (40, 2.0, 32), (12, 2.0, 12)]
+)
+def test_the_first_neighbourhoods_follow_the_fleet(
+    robots: int, share: float, first: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A step re-inserts ``robots`` robots at first, or the fleet's share where that is
+    more, never more than max_robots (32) or the fleet."""
+    ctx = _context(stitched_problem(3, robots, 3.0), "avg_completion")
+    assert ctx.problem.n_robots == robots
+    counts: list[int] = []
+    original = reinsert._pick
+
+    def spy(static: reinsert._Static, count: int, *args: object) -> np.ndarray:
+        counts.append(count)
+        return original(static, count, *args)
+
+    monkeypatch.setattr(reinsert, "_pick", spy)
+    config = reinsert.ReinsertConfig(fleet_share=share, max_robots=32)
+    reinsert.reinsert_search(ctx, plain_start(ctx), np.inf, 0, config, max_steps=1)
+    assert counts == [first]
