@@ -456,6 +456,8 @@ class Evaluator:
         # (2M,) slots of realized conflicts (re-scheduling): decided in the past, they only
         # relate passed points and never constrain the future.
         self._live = ~np.repeat(problem.realized, 2)
+        # A constraint within this of holding with equality binds (see binding).
+        self._tight = 1e-9 * max(1.0, float(np.abs(problem.tp_time).max(initial=0.0)))
         counts = np.diff(problem.tp_start).astype(np.float64)  # (R,) time points per robot
         weights = np.zeros(self.n_events + 1)
         np.add.at(weights, self._tp_event, 1.0 / (counts[tp_robot] * problem.n_robots))
@@ -577,12 +579,11 @@ class Evaluator:
         at the second side's pair enter is exactly what this conflict demands,
         so reversing it or changing its type is what can lower that delay.
         """
-        tol = 1e-9 * max(1.0, float(np.abs(self.problem.tp_time).max(initial=0.0)))
         return _binding(
             self._target, self._source, self._offset, self.problem.realized,
             np.asarray(assignments.a_first[sample], dtype=bool),
             np.asarray(assignments.following[sample], dtype=bool), evaluation.event_delay[sample],
-            tol,
+            self._tight,
         )  # fmt: skip
 
     def objective_weights(self, objective: Objective) -> np.ndarray:
