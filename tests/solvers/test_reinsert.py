@@ -4,7 +4,9 @@ a lone robot's passage is never worse than the one it had, and the search only i
 
 from __future__ import annotations
 
+import itertools
 import json
+import math
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -188,6 +190,78 @@ def test_a_lone_robot_never_finishes_later_than_it_did(family: str, seed: int, r
         )  # fmt: skip
         had = float(weight[_events_of(ctx, order)] @ current.delay[_events_of(ctx, order)])
         assert cost <= had + 1e-9
+
+
+@settings(max_examples=60, deadline=None, derandomize=True, suppress_health_check=SLOW)
+@given(family=FAMILIES, seed=st.integers(0, 10_000), robots=st.integers(3, 12))
+def test_a_passage_is_the_best_of_every_choice_of_gaps(family: str, seed: int, robots: int) -> None:
+    """A robot put back alone past held robots, following-type allowed at random: its
+    passage's last delay is the least over every non-decreasing choice of its nodes' gaps
+    (each checked on its own: the robot waits for every partner passing first, from
+    that conflict's pair enter on, and leaves before the latest of every partner it
+    passes first), and it finds none exactly when no choice is feasible."""
+    ctx = _context(_request(family, seed, robots), "avg_completion")
+    problem = ctx.problem
+    if problem.n_conflicts == 0:
+        return
+    st_, current = reinsert._Static.of(ctx), _incumbent(ctx)
+    rng = np.random.default_rng(seed)
+    for robot in range(problem.n_robots):
+        js = np.arange(st_.rc_start[robot], st_.rc_start[robot + 1])
+        if js.size == 0:
+            continue  # in no conflict
+        kidx, ranks = reinsert._distinct_ranks(current.pos[st_.rc_partner_node[js]])
+        n_nodes = int(problem.robot_start[robot + 1] - problem.robot_start[robot])
+        if math.comb(ranks.size + n_nodes, n_nodes) > 3000:
+            continue
+        follow = st_.rc_may_follow[js] & (rng.random(js.size) < 0.5)
+        e0, e1 = st_.ev_start[robot], st_.ev_start[robot + 1]
+        delay = current.delay.copy()
+        gap = np.empty(n_nodes, dtype=np.int64)
+        first, chosen = np.empty(js.size, dtype=bool), np.empty(js.size, dtype=bool)
+        found = reinsert._passage(
+            st_, js, kidx, ranks.size, follow, e0, st_.ev_node[e0:e1], n_nodes, delay,
+            current.latest, gap, first, chosen,
+        )  # fmt: skip
+        best = _best_gaps(st_, js, kidx, ranks.size, follow, e0, e1, n_nodes, current)
+        assert found == np.isfinite(best)
+        if found:
+            assert delay[e1 - 1] == pytest.approx(best, abs=1e-6)
+
+
+def _best_gaps(
+    st_: reinsert._Static,
+    js: np.ndarray,
+    kidx: np.ndarray,
+    m: int,
+    follow: np.ndarray,
+    e0: int,
+    e1: int,
+    n_nodes: int,
+    current: reinsert._Incumbent,
+) -> float:
+    """The least last delay of a robot over every non-decreasing choice of gaps (inf: no
+    choice feasible), each choice's delays found event by event."""
+    d, latest, t = current.delay, current.latest, follow.astype(int)
+    release = np.where(st_.own_live[js], d[st_.own_source[t, js]] + st_.own_offset[t, js], -np.inf)
+    deadline = np.where(
+        st_.oth_live[js], latest[st_.oth_target[js]] - st_.oth_offset[t, js], np.inf
+    )
+    release_event, deadline_event = st_.own_target[js], st_.oth_source[t, js]
+    best = np.inf
+    for gaps in itertools.combinations_with_replacement(range(m + 1), n_nodes):
+        passes_first = kidx >= np.array(gaps)[st_.rc_node[js]]  # (K,) the robot first
+        forced = st_.rc_force[js]
+        if ((forced > 0) & ~passes_first).any() or ((forced < 0) & passes_first).any():
+            continue
+        waits = ~passes_first
+        delays = np.array([  # (N,) its delay at each of its events
+            max([0.0, *release[waits & (release_event <= e)]]) for e in range(e0, e1)
+        ])  # fmt: skip
+        if (delays[deadline_event[passes_first] - e0] > deadline[passes_first] + 1e-9).any():
+            continue
+        best = min(best, float(delays[-1]))
+    return best
 
 
 @settings(max_examples=20, deadline=None, derandomize=True, suppress_health_check=SLOW)
