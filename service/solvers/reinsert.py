@@ -639,7 +639,7 @@ def planned_start(
     np.minimum.at(free_start, p.tp_robot, p.tp_time)
     rng = np.random.default_rng(seed)
     every = np.arange(p.n_robots)
-    fixed = _fixed_between(_Static.of(ctx), every, np.ones(p.n_conflicts, dtype=bool))
+    fixed = _fixed_between(_Static.of(ctx), every, True)
     weight = ctx.evaluator.objective_weights(ctx.objective)
     found = None
     for k in range(orders):
@@ -702,7 +702,7 @@ def _best_repair(
     room = budget - current.counts
     _give_back(st, np.flatnonzero(current.following & freed), room)
     base_following = current.following & ~freed
-    tails, heads = _fixed_between(st, picked, freed)
+    tails, heads = _fixed_between(st, picked, False)
     found, found_cost = None, np.inf
     for _ in range(orders):
         order = _fixed_first(rng.permutation(picked), tails, heads)
@@ -716,20 +716,34 @@ def _best_repair(
     return found
 
 
+@numba.njit(cache=True, nogil=True)
 def _fixed_between(
-    st: _Static, picked: np.ndarray, freed: np.ndarray
+    st: _Static, picked: np.ndarray, realized: bool
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The fixed directions between two picked robots, as robot arcs (first (F,), second
-    (F,))."""
-    conflicts = np.flatnonzero(freed & (st.forced != 0))
-    robots = st.conf_robots[conflicts]  # (F, 2)
-    both = np.isin(robots, picked).all(axis=1)
-    robots, a_first = robots[both], st.forced[conflicts[both]] > 0
-    return np.where(a_first, robots[:, 0], robots[:, 1]), np.where(
-        a_first, robots[:, 1], robots[:, 0]
-    )
+    """The fixed directions between two ``picked`` robots (k,), realized conflicts' too
+    where ``realized``, as robot arcs (first (F,), second (F,)), one per conflict: read
+    from the picked robots' slots (a pass over every conflict's direction and a set
+    lookup in numpy took ~0.1 ms a step at 22,000 conflicts)."""
+    is_picked = np.zeros(st.rc_start.size - 1, dtype=np.bool_)
+    is_picked[picked] = True
+    tails = np.empty(0, dtype=np.int64)
+    heads = np.empty(0, dtype=np.int64)
+    for fill in range(2):  # count, then fill
+        n = 0
+        for r in picked:
+            for j in range(st.rc_start[r], st.rc_start[r + 1]):
+                if st.rc_force[j] <= 0 or not is_picked[st.rc_partner[j]]:
+                    continue  # only the side that must pass first names the arc
+                if realized or st.fixed_type[st.rc_conf[j]] < 0:
+                    if fill:
+                        tails[n], heads[n] = r, st.rc_partner[j]
+                    n += 1
+        if not fill:
+            tails, heads = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
+    return tails, heads
 
 
+@numba.njit(cache=True, nogil=True)
 def _fixed_first(order: np.ndarray, tails: np.ndarray, heads: np.ndarray) -> np.ndarray:
     """``order`` (k,) changed as little as it takes for a robot that must pass another
     picked robot first (arcs ``tails`` -> ``heads``) to be put back before it: a robot put
@@ -737,26 +751,35 @@ def _fixed_first(order: np.ndarray, tails: np.ndarray, heads: np.ndarray) -> np.
     Kahn's order, taking the earliest ready robot of ``order``; robots on a cycle of
     fixed directions (possible between robots, never between nodes) keep their places
     after the rest."""
-    if tails.size == 0:
+    k = order.size
+    if tails.size == 0 or k == 0:
         return order
-    place = {int(r): i for i, r in enumerate(order)}  # robot -> its index in order
-    waiting = np.zeros(order.size, dtype=np.int64)  # (k,) fixed arcs into each, by index
-    after: dict[int, list[int]] = {}
-    for tail, head in zip(tails.tolist(), heads.tolist(), strict=True):
-        waiting[place[head]] += 1
-        after.setdefault(place[tail], []).append(place[head])
-    ready = [i for i in range(order.size) if waiting[i] == 0]  # a heap: the earliest first
-    out: list[int] = []
-    while ready:
+    place = np.full(order.max() + 1, -1, dtype=np.int64)  # robot -> its index in order
+    place[order] = np.arange(k)
+    tail, head = place[tails], place[heads]  # (F,) by index in order
+    waiting = np.zeros(k, dtype=np.int64)  # fixed arcs into each
+    start = np.zeros(k + 1, dtype=np.int64)  # arcs out of index i: after[start[i]:start[i+1]]
+    for a in range(tail.size):
+        waiting[head[a]] += 1
+        start[tail[a] + 1] += 1
+    start = np.cumsum(start)
+    after, filled = np.empty(tail.size, dtype=np.int64), start[:-1].copy()
+    for a in range(tail.size):
+        after[filled[tail[a]]] = head[a]
+        filled[tail[a]] += 1
+    ready = [i for i in range(k) if waiting[i] == 0]  # a heap: the earliest first
+    out, taken, n = np.empty(k, dtype=np.int64), np.zeros(k, dtype=np.bool_), 0
+    while len(ready) > 0:
         i = heapq.heappop(ready)
-        out.append(i)
-        for j in after.get(i, ()):
+        out[n], taken[i], n = i, True, n + 1
+        for j in after[start[i] : start[i + 1]]:
             waiting[j] -= 1
             if waiting[j] == 0:
                 heapq.heappush(ready, j)
-    taken = np.zeros(order.size, dtype=bool)
-    taken[out] = True
-    return order[np.concatenate([out, np.flatnonzero(~taken)]).astype(np.int64)]
+    for i in range(k):
+        if not taken[i]:
+            out[n], n = i, n + 1
+    return order[out]
 
 
 @numba.njit(cache=True, nogil=True)

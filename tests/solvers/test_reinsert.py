@@ -405,8 +405,7 @@ def test_a_plan_of_the_whole_fleet_is_valid_and_its_first_robot_never_waits(
         return
     order = np.random.default_rng(seed).permutation(problem.n_robots)
     static = reinsert._Static.of(ctx)
-    freed = np.ones(problem.n_conflicts, dtype=bool)
-    fixed = reinsert._fixed_between(static, np.arange(problem.n_robots), freed)
+    fixed = reinsert._fixed_between(static, np.arange(problem.n_robots), True)
     plan = reinsert._plan(ctx, order, fixed, ctx.evaluator.objective_weights(ctx.objective))
     if plan is None:  # only where fixed directions leave a robot no passage
         assert problem.has_forced
