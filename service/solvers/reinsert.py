@@ -437,12 +437,34 @@ def _repair(
 @numba.njit(cache=True, nogil=True)
 def _distinct_ranks(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(K,) x float -> (each value's rank among the distinct values (K,) int, the
-    distinct values sorted (m,)): one sort, a merge sort (numba's quicksort took twice as
-    long on a robot's partner positions at 250 robots, np.unique then np.searchsorted
-    three times)."""
-    by_value = np.argsort(x, kind="mergesort")
-    rank = np.empty(x.size, dtype=np.int64)
-    distinct = np.empty(x.size)
+    distinct values sorted (m,)). Positions are a topological order re-ranked to
+    0..V-1 plus the fractions repairs put between them, so where they span at most
+    4K units they are bucketed by their integer part (few share one) in O(K + span);
+    otherwise one merge sort. At 250 robots (K ~175, V 250) the buckets took ~1 us a
+    robot, the merge sort ~3.5-7 (numba's quicksort twice that, np.unique then
+    np.searchsorted three times)."""
+    k = x.size
+    rank = np.empty(k, dtype=np.int64)
+    if k == 0:
+        return rank, np.empty(0)
+    low, high = np.floor(x.min()), np.floor(x.max())
+    if high - low > 4 * k:
+        by_value = np.argsort(x, kind="mergesort")
+    else:
+        start = np.zeros(int(high - low) + 2, dtype=np.int64)  # values by integer part
+        for v in x:
+            start[int(np.floor(v) - low) + 1] += 1
+        start = np.cumsum(start)
+        by_value, filled = np.empty(k, dtype=np.int64), start[:-1].copy()
+        for i in range(k):
+            b = int(np.floor(x[i]) - low)
+            j = filled[b]  # insertion within the bucket, which is short
+            while j > start[b] and x[by_value[j - 1]] > x[i]:
+                by_value[j] = by_value[j - 1]
+                j -= 1
+            by_value[j] = i
+            filled[b] += 1
+    distinct = np.empty(k)
     m = 0
     for i in by_value:
         if m == 0 or x[i] != distinct[m - 1]:
