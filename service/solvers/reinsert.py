@@ -165,9 +165,9 @@ class _Static(NamedTuple):
     rc_conf[j], and every rc_/own_/oth_ array is indexed by slot, so that a robot's
     passage reads its conflicts' data in one sweep, not scattered over (M,) arrays (a
     repair of 16 robots at 250 robots 0.75-0.85 -> 0.58-0.65 ms, the same answers;
-    session 34). ``own_*`` is the evaluator's slot (see
-    Evaluator._build_slots) where r passes second (its pair enter waits on the
-    partner), ``oth_*`` the one where the partner does."""
+    session 34). ``own_*`` is the evaluator's slot (see Evaluator._build_slots) where
+    r passes second (its pair enter waits on the partner), ``oth_*`` the one where the
+    partner does."""
 
     rc_start: np.ndarray  # (R+1,) robot r's slots are rc_start[r]:rc_start[r+1]
     rc_conf: np.ndarray  # (2M,) each slot's conflict
@@ -186,11 +186,9 @@ class _Static(NamedTuple):
     oth_source: np.ndarray  # (2, 2M) by type, the robot's event the partner waits on
     oth_offset: np.ndarray  # (2, 2M)
     conf_nodes: np.ndarray  # (M, 2) node of each side
-    conf_robots: np.ndarray  # (M, 2) robot of each side
     robot_start: np.ndarray  # (R+1,) nodes by robot
     ev_start: np.ndarray  # (R+1,) events by robot
     ev_node: np.ndarray  # (E,) the robot's node (0: its first) of each event
-    forced: np.ndarray  # (M,) int8 +1 side a first, -1 side b first, 0 free
     fixed_type: np.ndarray  # (M,) int8 -1 free, 0 exclusive, 1 following
     cq_start: np.ndarray  # (M+1,) conflict -> its binding cliques
     cq_clique: np.ndarray
@@ -241,11 +239,9 @@ class _Static(NamedTuple):
             np.ascontiguousarray(graph.source[:, oth], dtype=np.int64),
             np.ascontiguousarray(graph.offset[:, oth]),
             conf_nodes,
-            conf_robots.astype(np.int64),
             p.robot_start.astype(np.int64),
             np.searchsorted(event_robot, np.arange(p.n_robots + 1)).astype(np.int64),
             ev_node - p.robot_start[event_robot],
-            p.forced,
             p.fixed_type,
             cq_start.astype(np.int64),
             cq_clique.astype(np.int64),
