@@ -105,7 +105,8 @@ PORTFOLIOS = ("auto", "auto_2cores")  # the methods held to issue 11's targets
 EARLY = 0.5  # a run ending before this share of its budget stopped on its own
 # A run longer than OVERRUN x its budget + OVERRUN_S is listed as an overrun.
 OVERRUN, OVERRUN_S = 1.1, 0.05
-# The 30-s references of the default generated worlds (r4: made in session 27, beside r3's).
+# The 30-s references of the default generated worlds (r5: r4 of session 27 and new runs of
+# the 100- and 250-robot worlds, session 34).
 RESULTS = Path(__file__).resolve().parents[1] / "docs/results/anytime"
 REFERENCES = RESULTS / f"references-r{REFERENCE_VERSION}.json"
 

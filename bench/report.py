@@ -135,8 +135,11 @@ class JsonCache:
 # warehouses cost 15-40 % less than the old references; 3: session 24, LNS after priority
 # search at 250 robots and its wider step, whose 10-s answers there cost 10-28 % less than
 # the r2 references; 4: session 27, re-insertion and LNS delay held robots up to their
-# latest delays, whose 5-s answers on 100-250-robot warehouses cost less than r3).
-REFERENCE_VERSION = 4
+# latest delays, whose 5-s answers on 100-250-robot warehouses cost less than r3; 5:
+# session 34, re-insertion's repairs no longer thrown away where a robot fixed to pass
+# first found no passage, whose 5-s answers on 250-robot warehouses cost 2-2.6 % less
+# than r4's 30-s ones; r5 holds r4's runs and new ones of the 100- and 250-robot worlds).
+REFERENCE_VERSION = 5
 
 
 def reference_cache(directory: Path, name: str) -> JsonCache:
