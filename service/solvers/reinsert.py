@@ -713,7 +713,7 @@ def reinsert_search(
             st, count, np.maximum(current.robot_delay, 0.0) + 1e-9, current.blocking,
             config.blocking_weight, rng.random(count),
         )  # fmt: skip
-        found = _best_repair(ctx, st, current, picked, budget, weight, rng, config.orders)
+        found = _best_repair(st, current, picked, budget, weight, rng, config.orders)
         cooled = (  # the share of the cooling gone: by steps where they are capped
             min((time.monotonic() - warm_from) / max(cold_at - warm_from, 1e-9), 1.0)
             if max_steps is None
@@ -801,7 +801,6 @@ def _plan(
 
 
 def _best_repair(
-    ctx: SolveContext,
     st: _Static,
     current: _Incumbent,
     picked: np.ndarray,
