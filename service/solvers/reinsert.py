@@ -46,8 +46,9 @@ corrects. Deterministic for a seed where the steps are capped (``max_steps``).
 
 **Annealed acceptance** (``ReinsertConfig.anneal``, default ANNEAL): a repair dearer than
 the current answer by x is kept with probability exp(-x / T), the temperature T falling
-linearly from ``anneal`` times the best cost to zero over the search (over all of its
-turns, in :mod:`service.solvers.turns`); the search returns the cheapest answer it saw.
+linearly from ``anneal`` times the best cost to zero over the search (over the first
+half of its turns' time, in :mod:`service.solvers.turns`, then cold: only cheaper repairs
+kept); the search returns the cheapest answer it saw.
 Keeping only cheaper repairs, it stalled: alone from the plans, on the generated
 warehouses of 100 and 250 robots, it read 0.76-0.94 of the best known after 2 s and
 barely more after 5 s with 2.5 times the steps (session 32), and two repairs a step on two

@@ -94,3 +94,27 @@ def test_the_split_moves_toward_the_search_that_paid(
     low, high = sorted((share, rate_p / (rate_r + rate_p)))
     least, most = config.least_share, 1 - config.least_share
     assert min(max(low, least), most) - 1e-12 <= nxt <= min(max(high, least), most) + 1e-12
+
+
+def test_reinsertion_cools_over_the_first_share_of_the_turns(monkeypatch) -> None:
+    """Every re-insertion search of the turns gets the same cooling span: from the turns'
+    start over cooling_share of their time (then it searches cold to the deadline)."""
+    import service.solvers.turns as turns
+
+    spans: list[tuple[float, float]] = []
+
+    def recorded(*args, cooling, **kwargs):
+        spans.append(cooling)
+        return reinsert_search(*args, cooling=cooling, **kwargs)
+
+    monkeypatch.setattr(turns, "reinsert_search", recorded)
+    line = (DATA / "wh_50.jsonl").read_text().splitlines()[0]
+    ctx = _context(json.loads(line)["request"], "avg_completion")
+    start = plain_start(ctx)
+    cost = float(ctx.evaluator.evaluate(start).costs["avg_completion"][0])
+    begin = time.monotonic()
+    take_turns(ctx, start, cost, begin + 0.4, 0, TurnsConfig(cooling_share=0.25))
+    assert len(spans) >= 3 and len(set(spans)) == 1
+    warm_from, cold_at = spans[0]
+    assert begin <= warm_from < begin + 0.01
+    assert abs((cold_at - warm_from) - 0.25 * (begin + 0.4 - warm_from)) < 1e-9
