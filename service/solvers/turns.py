@@ -42,6 +42,7 @@ __all__ = ["COOLED_SHARE", "TurnsConfig", "TurnsResult", "take_turns"]
 # r5, beside same-code controls; docs/benchmarks.md): cooling over all of the time 1 s
 # 0.8413 / 0.8383 / 0.8402, 5 s 0.9218 / 0.9288 / 0.9336; over half 1 s 0.8472 / 0.8550,
 # 5 s 0.9341 / 0.9319; over 0.7 1 s 0.8472, 5 s 0.9278; over 0.3 1 s 0.8472, 5 s 0.9193.
+# On kinds not tuned on (wh_mixed, wh_one_way, wh_parked at 250 robots): even at both.
 COOLED_SHARE = 0.5
 
 

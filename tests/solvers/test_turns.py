@@ -9,11 +9,13 @@ import json
 import time
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from service.core.assignment import Assignments
 from service.core.check import check
+from service.solvers import turns
 from service.solvers.priority import PriorityConfig, answer_ranks, priority_search
 from service.solvers.registry import SolveContext
 from service.solvers.reinsert import reinsert_search
@@ -96,11 +98,11 @@ def test_the_split_moves_toward_the_search_that_paid(
     assert min(max(low, least), most) - 1e-12 <= nxt <= min(max(high, least), most) + 1e-12
 
 
-def test_reinsertion_cools_over_the_first_share_of_the_turns(monkeypatch) -> None:
+def test_reinsertion_cools_over_the_first_share_of_the_turns(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
     """Every re-insertion search of the turns gets the same cooling span: from the turns'
     start over cooling_share of their time (then it searches cold to the deadline)."""
-    import service.solvers.turns as turns
-
     spans: list[tuple[float, float]] = []
 
     def recorded(*args, cooling, **kwargs):
