@@ -80,9 +80,9 @@ def take_turns(
     """Re-insertion then priority search, in turns from the valid ``start`` (of ``cost``)
     until ``deadline`` (monotonic); each turn's searches get the next seed."""
     best, turns, share = start, 0, config.priority_share
-    turn_s = min(config.turn_s, config.turn_share * (deadline - time.monotonic()))
-    now = time.monotonic()  # re-insertion cools over its turns' first cooling_share
-    cooling = (now, now + config.cooling_share * (deadline - now))
+    now = time.monotonic()
+    turn_s = min(config.turn_s, config.turn_share * (deadline - now))
+    cooling = (now, now + config.cooling_share * (deadline - now))  # then it searches cold
     while time.monotonic() < deadline:
         began, before = time.monotonic(), cost
         found = reinsert_search(
