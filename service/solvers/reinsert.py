@@ -39,7 +39,11 @@ some). Delays up to the latest never add up to more (a schedule below the latest
 below it), so the held robots' part stays; the picked robots' part is exact unless a
 robot pushed a held partner that it (or another picked robot) waits for further on,
 which then releases it later than planned: the exact evaluation that decides counts
-that. Objectives: the sums, as :mod:`service.solvers.lns` (avg_completion, avg_delay;
+that. A picked robot may also pass a held partner first where that delays the partner
+past its latest, at a price per unit past it (PUSH): a trade the held times alone never
+allow (one robot's gain against another's loss), which the evaluation then prices
+exactly; the partner's held times are not moved for the robots put back after it.
+Objectives: the sums, as :mod:`service.solvers.lns` (avg_completion, avg_delay;
 for avg_delay every event is in the objective, so no event has room); a passage
 minimises its robot's last delay, which for avg_delay is a proxy that the evaluation
 corrects. Deterministic for a seed where the steps are capped (``max_steps``).
@@ -96,6 +100,20 @@ TOL = 1e-9  # delays closer than this are equal
 # and, again, 0.8098 / 0.9296; 0.04 0.8043 / 0.9243. Cooling within each turn instead
 # (each search from its own start to its deadline) read 0.7953 / 0.9233 at 0.02.
 ANNEAL = 0.02
+# A picked robot may pass a held partner first even where that delays the partner past
+# its latest, at a price per unit of delay past it of PUSH times the incumbent's mean slope
+# (:meth:`~service.core.evaluate.Evaluator.evaluate_with_latest`: the objective's rise
+# per unit of an event's delay past its latest, to first order, averaged over events):
+# a flat price, since a push spreads further than the first order where it passes the
+# next robots' slack, and the mean scales with how far pushes spread on the fleet (on
+# warehouses of 250 robots 7.5 on two-lane, 31 on two-way ones). Measured (session 36;
+# re-insertion alone from the plans for 0.8 s, the 12 generated warehouses of 100 and
+# 250 robots, two seeds, against r5): held at their latest (no pushes) 0.8167, PUSH 2
+# 0.8755, 4 0.8712, 8 0.8517; a price per event by its own slope (x0.5-2) 0.52-0.66,
+# stuck on two-way warehouses (pushes there spread far past the first order); a price
+# of 16 or 32 for every fleet good on two-lane, bad on two-way ones. ``auto`` at 1 s
+# (four seeds, beside two controls): 0.8523 / 0.8537 -> PUSH 1 0.8684, 2 0.8889, 4 0.8761.
+PUSH = 2.0
 # Robots re-inserted per step at first, as a share of the fleet (ReinsertConfig.robots at
 # least, so fleets below 136 robots keep 8): a step's evaluation walks the whole fleet,
 # its repair only the picked robots, so bigger fleets afford more robots a step. Measured
@@ -151,6 +169,9 @@ class ReinsertConfig:
     # to 0 over the search's cooling span (0: only cheaper repairs are kept); the best
     # answer seen is what the search returns. See ANNEAL.
     anneal: float = ANNEAL
+    # A unit of delay past a held robot's latest costs push x the incumbent's mean slope
+    # (0: none allowed, held robots stay within their latest). See PUSH.
+    push: float = PUSH
 
 
 SOLVER_CONFIG = ReinsertConfig(whole_fleet_plateau=64)  # the ``reinsert`` solver's
@@ -267,20 +288,29 @@ def _passage(
     n_nodes: int,
     d: np.ndarray,  # (E+1,) float, the placed robots' delays; the robot's written on exit
     latest: np.ndarray,  # (E+1,) float, the latest delays the placed robots' events may take
+    price: float,  # a unit of delay past a partner's latest, in the objective (inf: never)
+    own: float,  # the robot's weight in the objective
     gap: np.ndarray,  # (n_nodes,) int, out: each node's gap among the sorted partner positions
     first: np.ndarray,  # (K,) bool, out: the robot passes first
     following: np.ndarray,  # (K,) bool, out: following-type
-) -> bool:
+) -> float:
     """The robot's passage with the least last delay past its placed partners, whose
-    times ``d`` are held (see the module); False if none exists (fixed directions
-    against held times). Gap g of a node: its partners at the g smallest distinct
-    positions pass first (the partner of conflict i iff kidx[i] < g)."""
+    times ``d`` are held (see the module), plus ``price`` per unit it delays a partner
+    past its latest -> that price paid (in the objective's units), or -1 if no passage
+    exists (fixed directions against held times). Gap g of a node: its partners at the
+    g smallest distinct positions pass first (the partner of conflict i iff kidx[i] <
+    g). Exact for the robot alone. Pushes only where the robot has one node (on the
+    generated warehouses every robot has one)."""
     k = js.size
     # Each conflict's release (robot second) and deadline (robot first), at its type.
     rel_e = np.empty(k, dtype=np.int64)  # events of the robot's own: 0..N-1
     rel_v = np.full(k, -np.inf)
     dl_e = np.empty(k, dtype=np.int64)
     dl_v = np.full(k, np.inf)
+    # A unit of delay past the partner's latest, in units of the robot's delay; only for a
+    # robot of one node, whose gap is chosen once (with several, the cheapest way into a
+    # node's gap need not lead to the cheapest passage).
+    past = price / max(own, 1e-300) if n_nodes == 1 else np.inf
     force = np.empty(k, dtype=np.int64)
     for i in range(k):
         j, t = js[i], 1 if follow[i] else 0
@@ -295,6 +325,8 @@ def _passage(
     # of node n-1 that least[g] came from on entering node n. On the first node, where
     # the feasible least[g] never fall as g grows, faster (see _first_node_release).
     least = np.zeros(m + 1)
+    pen = np.zeros(m + 1)  # the price paid so far for partners pushed past their latest
+    # (on the first node only: there are no pushes where the robot has more)
     back = np.empty((n_nodes, m + 1), dtype=np.int64)
     # While on the first node: up[g] / down[g + 1] lead to the nearest feasible gap at or
     # above / at or below g (m + 1 / -1 if none), so that scans skip infeasible gaps.
@@ -330,7 +362,7 @@ def _passage(
             i = by_dl[t]
             t += 1
             if current == 0:
-                _first_node_deadline(least, up, down, kidx[i], dl_v[i])
+                _first_node_deadline(least, pen, up, down, kidx[i], dl_v[i], past)
                 continue
             for g in range(kidx[i] + 1):
                 if least[g] > dl_v[i] + TOL:
@@ -339,12 +371,12 @@ def _passage(
         back[n] = np.arange(m + 1)
     best, arg = np.inf, -1
     for g in range(m + 1):
-        if least[g] < best - TOL:
-            best, arg = least[g], g
-        elif least[g] <= best + TOL and arg >= 0:
+        if least[g] + pen[g] < best - TOL:
+            best, arg = least[g] + pen[g], g
+        elif least[g] + pen[g] <= best + TOL and arg >= 0:
             arg = g
     if arg < 0:
-        return False
+        return -1.0
     gap[n_nodes - 1] = arg
     for n in range(n_nodes - 1, 0, -1):
         gap[n - 1] = back[n, gap[n]]
@@ -372,7 +404,7 @@ def _passage(
                 d[st.own_source[0, j]] + st.own_offset[0, j] > d[st.own_target[j]] + TOL,
             )
         following[i] = follow[i] and live and need
-    return True
+    return pen[arg] * own if pen[arg] > 0 else 0.0
 
 
 @numba.njit(cache=True, nogil=True)
@@ -405,14 +437,24 @@ def _first_node_release(
 
 @numba.njit(cache=True, nogil=True)
 def _first_node_deadline(
-    least: np.ndarray, up: np.ndarray, down: np.ndarray, hi: int, value: float
+    least: np.ndarray,
+    pen: np.ndarray,
+    up: np.ndarray,
+    down: np.ndarray,
+    hi: int,
+    value: float,
+    price: float,
 ) -> None:
     """A deadline on the robot's first node: gaps 0..hi (the robot passes first) whose
-    least delay exceeds ``value`` are infeasible; scanning down from ``hi`` it stops at
-    the first feasible gap within it (see :func:`_first_node_release`)."""
+    least delay exceeds ``value`` are infeasible, or with a finite ``price`` pay it per
+    unit past ``value`` (``pen``); scanning down from ``hi`` it stops at the first
+    feasible gap within it (see :func:`_first_node_release`)."""
     g = _nearest(down, hi + 1) - 1
     while g >= 0 and least[g] > value + TOL:
-        _drop(least, up, down, g)
+        if np.isfinite(price):
+            pen[g] += (least[g] - value) * price
+        else:
+            _drop(least, up, down, g)
         g = _nearest(down, g) - 1
 
 
@@ -472,6 +514,7 @@ def _repair(
     following: np.ndarray,  # (M,) bool, likewise
     weight: np.ndarray,  # (E+1,) float, each event delay's weight in the objective
     preferred: np.ndarray,  # (M,) bool, conflicts given room for following-type first
+    price: float,  # a unit of delay past a placed robot's latest (inf: never), see _passage
 ) -> tuple[float, int]:
     """Put the picked robots back in ``order``, each on its passage past the robots
     placed so far (held ones, then those put back before it) -> (the picked robots' part
@@ -512,10 +555,13 @@ def _repair(
         first = np.empty(k, dtype=np.bool_)
         chosen = np.empty(k, dtype=np.bool_)
         ev_node = st.ev_node[e0:e1]
-        if not _passage(
-            st, js, kidx, ranks.size, follow, e0, ev_node, n_nodes, d, latest, gap, first, chosen
-        ):
+        pushed = _passage(
+            st, js, kidx, ranks.size, follow, e0, ev_node, n_nodes, d, latest, price,
+            weight[e0:e1].sum(), gap, first, chosen,
+        )  # fmt: skip
+        if pushed < 0:
             return np.inf, n_placed
+        cost += pushed
         _give_back(st, st.rc_conf[js[follow & ~chosen]], room)  # the room it did not need
         for i in range(k):
             c = st.rc_conf[js[i]]
@@ -635,6 +681,7 @@ class _Incumbent:
     cost: float
     delay: np.ndarray  # (E+1,) least delays
     latest: np.ndarray  # (E+1,) latest delays leaving every robot's part of the objective
+    slope: float  # the objective's mean rise per unit of an event's delay past its latest
     pos: np.ndarray  # (V,) float, a topological order of the node graph
     counts: np.ndarray  # (Q,) following-type conflicts per clique
     robot_delay: np.ndarray  # (R,) each robot's delay at completion
@@ -648,6 +695,7 @@ class _Incumbent:
         evaluation: Evaluation,
         pos: np.ndarray,
         latest: np.ndarray,
+        slope: np.ndarray,
         counts: np.ndarray | None = None,
     ) -> _Incumbent:
         """``answer`` with its evaluation, a topological order ``pos`` (V,) of its node
@@ -663,6 +711,7 @@ class _Incumbent:
             float(evaluation.costs[ctx.objective][0]),
             evaluation.event_delay[0],
             latest,
+            float(slope[:-1].mean()) if slope.size > 1 else 0.0,
             np.argsort(np.argsort(pos, kind="stable")).astype(np.float64),
             counts,
             evaluation.completion[0] - ctx.problem.free_time(),
@@ -691,12 +740,13 @@ def reinsert_search(
     weight = ctx.evaluator.objective_weights(ctx.objective)
     budget = ctx.cliques.budget.astype(np.int64)
     rng = np.random.default_rng(seed)
-    held = weight > 0  # (E+1,) the objective's events
+    held = weight  # (E+1,) the objective's events, by weight
     rank = ctx.orientation.topological_rank(start.a_first[0])
-    evaluation, latest = ctx.evaluator.evaluate_with_latest(start, held)
+    slope = np.empty(weight.size)
+    evaluation, latest = ctx.evaluator.evaluate_with_latest(start, held, slope)
     if rank is None or latest is None:
         raise ValueError("the answer to search from closes a cycle")
-    current = _Incumbent.of(ctx, start, evaluation, rank, latest)
+    current = _Incumbent.of(ctx, start, evaluation, rank, latest, slope)
     best, best_cost = start, current.cost
     n_robots, steps = ctx.problem.n_robots, 0
     count = max(config.robots, min(round(config.fleet_share * n_robots), config.max_robots))
@@ -714,7 +764,9 @@ def reinsert_search(
             st, count, np.maximum(current.robot_delay, 0.0) + 1e-9, current.blocking,
             config.blocking_weight, rng.random(count),
         )  # fmt: skip
-        found = _best_repair(st, current, picked, budget, weight, rng, config.orders)
+        found = _best_repair(
+            st, current, picked, budget, weight, _price(config, current), rng, config.orders
+        )
         cooled = (  # the share of the cooling gone: by steps where they are capped
             min((time.monotonic() - warm_from) / max(cold_at - warm_from, 1e-9), 1.0)
             if max_steps is None
@@ -729,6 +781,12 @@ def reinsert_search(
             continue
         best, best_cost, current, stalled = found[0], kept.cost, kept, 0
     return ReinsertResult(best, best_cost, steps)
+
+
+def _price(config: ReinsertConfig, current: _Incumbent) -> float:
+    """What a unit of delay past a held robot's latest costs a repair of ``current``:
+    ``config.push`` times its mean slope (inf, not allowed, where push is 0; see PUSH)."""
+    return config.push * current.slope if config.push > 0 else np.inf
 
 
 def _tolerated(temperature: float, rng: np.random.Generator) -> float:
@@ -796,7 +854,7 @@ def _plan(
     pos = np.arange(p.n_nodes, dtype=np.float64)  # (V,) increasing along every path
     cost, _ = _repair(
         _fixed_first(order.astype(np.int64), *fixed), st, delay, delay.copy(), pos, room,
-        a_first, following, weight, following.copy(),
+        a_first, following, weight, following.copy(), np.inf,
     )  # fmt: skip
     return Assignments.single(a_first, following) if np.isfinite(cost) else None
 
@@ -807,6 +865,7 @@ def _best_repair(
     picked: np.ndarray,
     budget: np.ndarray,
     weight: np.ndarray,
+    price: float,
     rng: np.random.Generator,
     orders: int,
 ) -> tuple[Assignments, np.ndarray] | None:
@@ -816,7 +875,7 @@ def _best_repair(
     shuffled = np.stack([rng.permutation(picked) for _ in range(orders)])  # (orders, k)
     cost, a_first, following, pos = _best_of_orders(
         st, shuffled, current.a_first, current.following, current.pos, current.delay,
-        current.latest, budget - current.counts, weight,
+        current.latest, budget - current.counts, weight, price,
     )  # fmt: skip
     return (Assignments.single(a_first, following), pos) if np.isfinite(cost) else None
 
@@ -832,6 +891,7 @@ def _best_of_orders(
     latest: np.ndarray,  # (E+1,) float
     room: np.ndarray,  # (Q,) int, each binding clique's room left by the incumbent
     weight: np.ndarray,  # (E+1,) float
+    price: float,
 ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
     """:func:`_repair` in each order (robots that must pass a picked one first moved ahead,
     :func:`_fixed_first`) -> the cheapest repair's picked part of the objective (inf:
@@ -854,7 +914,7 @@ def _best_of_orders(
             mine_pos = pos.copy()
             cost, failed = _repair(
                 order, st, delay.copy(), latest.copy(), mine_pos, room.copy(), mine_a_first,
-                mine_following, weight, following,
+                mine_following, weight, following, price,
             )  # fmt: skip
             if failed < 0:
                 break
@@ -994,7 +1054,8 @@ def _kept(
     None otherwise, and (a guard: repairs exclude both by construction) if ``pos`` is
     not a topological order of its node graph or a density clique holds more
     following-type conflicts than its budget."""
-    evaluation, latest = ctx.evaluator.evaluate_with_latest(found, held)
+    slope = np.empty(held.size)
+    evaluation, latest = ctx.evaluator.evaluate_with_latest(found, held, slope)
     if latest is None or not float(evaluation.costs[ctx.objective][0]) < below:
         return None
     if not _ordered(_Static.of(ctx), found.a_first[0], pos):
@@ -1002,7 +1063,7 @@ def _kept(
     counts = ctx.orientation.recount(current.counts, current.following, found.following[0])
     if (counts > ctx.cliques.budget).any():
         return None
-    return _Incumbent.of(ctx, found, evaluation, pos, latest, counts)
+    return _Incumbent.of(ctx, found, evaluation, pos, latest, slope, counts)
 
 
 @register("reinsert")

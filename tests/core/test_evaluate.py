@@ -443,6 +443,36 @@ def test_latest_delays_are_the_latest_that_keep_the_held_events(seed: int, stitc
             assert (_walk_with_floor(problem, assignment, floor)[held] > least[held] + 0.5).any()
 
 
+@settings(max_examples=30, deadline=None, derandomize=True)
+@given(seed=st.integers(0, 10_000), stitched=st.booleans())
+def test_slopes_bound_what_a_push_past_the_latest_raises(seed: int, stitched: bool) -> None:
+    """An event pushed a little past its latest (a floor on it, the rest walked again)
+    pushes held events by as much; their weight is at most the event's slope (which
+    counts a held event once per way to it), some are pushed wherever the slope is
+    positive, and no slope exceeds the total held weight."""
+    request = stitched_problem(seed, 10, 3.0) if stitched else small_problem(seed)
+    problem = _problem(request)
+    rng = np.random.default_rng(seed)
+    assignment = _decoded(problem, seed)
+    ev = Evaluator(problem)
+    weight = np.zeros(ev.n_events + 1)  # (E+1,) held events by weight: completions
+    weight[ev.graph.last_event] = rng.uniform(0.5, 2.0, ev.graph.last_event.size)
+    slope = np.empty(ev.n_events + 1)
+    evaluation, latest = ev.evaluate_with_latest(assignment, weight, slope)
+    assert latest is not None
+    least, held = evaluation.event_delay[0], weight > 0
+    assert (slope[:-1] <= weight.sum() + 1e-9).all() and (slope[held] >= weight[held]).all()
+    eps = 1e-6
+    for e in rng.choice(ev.n_events, size=min(12, ev.n_events), replace=False):
+        if not np.isfinite(latest[e]):
+            continue
+        floor = np.zeros(least.size)
+        floor[e] = latest[e] + eps
+        rise = _walk_with_floor(problem, assignment, floor) - least  # (E+1,)
+        assert weight[rise >= eps * (1 - 1e-3)].sum() <= slope[e] + 1e-9
+        assert (slope[e] > 0) == bool((rise[held] > eps / 2).any())
+
+
 @settings(max_examples=40, deadline=None)
 @given(seed=st.integers(0, 10_000), stitched=st.booleans(), decoded=st.booleans())
 def test_evaluate_with_latest_is_evaluate_and_latest_delays(

@@ -66,10 +66,11 @@ def _incumbent(ctx: SolveContext) -> reinsert._Incumbent:
     start = plain_start(ctx)
     rank = ctx.orientation.topological_rank(start.a_first[0])
     assert rank is not None
-    held = ctx.evaluator.objective_weights(ctx.objective) > 0
-    evaluation, latest = ctx.evaluator.evaluate_with_latest(start, held)
+    held = ctx.evaluator.objective_weights(ctx.objective)
+    slope = np.empty(held.size)
+    evaluation, latest = ctx.evaluator.evaluate_with_latest(start, held, slope)
     assert latest is not None
-    return reinsert._Incumbent.of(ctx, start, evaluation, rank, latest)
+    return reinsert._Incumbent.of(ctx, start, evaluation, rank, latest, slope)
 
 
 @settings(max_examples=60, deadline=None, derandomize=True, suppress_health_check=SLOW)
@@ -80,16 +81,19 @@ def _incumbent(ctx: SolveContext) -> reinsert._Incumbent:
     picked=st.integers(1, 8),
     objective=st.sampled_from(OBJECTIVES),
     slack=st.booleans(),
+    price=st.sampled_from([np.inf, 0.3, 3.0]),
 )
 def test_every_repair_is_valid_and_its_times_are_a_schedule_of_it(
-    family: str, seed: int, robots: int, picked: int, objective: str, slack: bool
+    family: str, seed: int, robots: int, picked: int, objective: str, slack: bool, price: float
 ) -> None:
-    """Whatever robots are put back, in whatever order: the answer passes the checker
-    (acyclic, within every density budget, fixed directions honoured), its positions are a
-    topological order of its node graph, and its times satisfy every constraint of it with
-    a picked robot released by its partner's least time and passing first no later than
-    the partner's latest. Held at their least times (no slack), the repair's times are a
-    schedule of its answer, so its least delays are no larger, event by event."""
+    """Whatever robots are put back, in whatever order, pushing held robots past their
+    latest at a price or not: the answer passes the checker (acyclic, within every
+    density budget, fixed directions honoured) and its positions are a topological order
+    of its node graph. Without pushes its times satisfy every constraint of it with a
+    picked robot released by its partner's least time and passing first no later than
+    the partner's latest, and held at their least times (no slack), the repair's times
+    are a schedule of its answer, so its least delays are no larger, event by event; its
+    cost is the picked robots' part, and with pushes that part plus the price paid."""
     ctx = _context(_request(family, seed, robots), objective)
     problem = ctx.problem
     if problem.n_conflicts == 0:
@@ -106,8 +110,9 @@ def test_every_repair_is_valid_and_its_times_are_a_schedule_of_it(
     latest = current.latest.copy() if slack else current.delay.copy()
     weight = ctx.evaluator.objective_weights(ctx.objective)
     cost, failed = reinsert._repair(
-        order, static, delay, latest, pos, room, a_first, following, weight, current.following
-    )
+        order, static, delay, latest, pos, room, a_first, following, weight, current.following,
+        price,
+    )  # fmt: skip
     if not np.isfinite(cost):  # only where fixed directions leave a robot no passage
         robot = order[failed]
         assert (static.rc_force[static.rc_start[robot] : static.rc_start[robot + 1]] > 0).any()
@@ -118,7 +123,7 @@ def test_every_repair_is_valid_and_its_times_are_a_schedule_of_it(
         alone = reinsert._repair(
             order[failed : failed + 1], static, current.delay.copy(), current.latest.copy(),
             current.pos.copy(), room, current.a_first.copy(), current.following & ~mine, weight,
-            current.following,
+            current.following, price,
         )  # fmt: skip
         assert alone[1] == -1
         return
@@ -129,6 +134,9 @@ def test_every_repair_is_valid_and_its_times_are_a_schedule_of_it(
     head = np.where(a_first, problem.conf_b, problem.conf_a)
     assert (pos[tail] < pos[head]).all() and reinsert._ordered(static, a_first, pos)
     mine = _events_of(ctx, order)
+    if np.isfinite(price):
+        assert cost >= float(weight[mine] @ delay[mine]) - 1e-9
+        return
     _assert_passages_keep_their_bounds(ctx, found, delay, latest, mine)
     if not slack:
         assert (ctx.evaluator.evaluate(found).event_delay[0] <= delay + 1e-6).all()
@@ -180,10 +188,18 @@ def _events_of(ctx: SolveContext, robots: np.ndarray) -> np.ndarray:
 
 
 @settings(max_examples=60, deadline=None, derandomize=True, suppress_health_check=SLOW)
-@given(family=FAMILIES, seed=st.integers(0, 10_000), robots=st.integers(3, 30))
-def test_a_lone_robot_never_finishes_later_than_it_did(family: str, seed: int, robots: int) -> None:
+@given(
+    family=FAMILIES,
+    seed=st.integers(0, 10_000),
+    robots=st.integers(3, 30),
+    price=st.sampled_from([np.inf, 0.3, 3.0]),
+)
+def test_a_lone_robot_never_finishes_later_than_it_did(
+    family: str, seed: int, robots: int, price: float
+) -> None:
     """Put back alone, with every other robot held, a robot's passage is exact for it: its
-    last delay is at most the one it had (whose passage is among those searched: its
+    last delay (plus the price of the held robots it pushes past their latest, where it
+    may) is at most the one it had (whose passage is among those searched: its
     following-type conflicts get the room they had first, binding budgets too)."""
     ctx = _context(_request(family, seed, robots), "avg_completion")
     problem = ctx.problem
@@ -200,7 +216,7 @@ def test_a_lone_robot_never_finishes_later_than_it_did(family: str, seed: int, r
         a_first, following = current.a_first.copy(), current.following & ~freed
         cost, failed = reinsert._repair(
             order, static, current.delay.copy(), current.latest.copy(), current.pos.copy(),
-            room, a_first, following, weight, current.following,
+            room, a_first, following, weight, current.following, price,
         )  # fmt: skip
         assert failed == -1
         had = float(weight[_events_of(ctx, order)] @ current.delay[_events_of(ctx, order)])
@@ -236,8 +252,8 @@ def test_a_passage_is_the_best_of_every_choice_of_gaps(family: str, seed: int, r
         first, chosen = np.empty(js.size, dtype=bool), np.empty(js.size, dtype=bool)
         found = reinsert._passage(
             st_, js, kidx, ranks.size, follow, e0, st_.ev_node[e0:e1], n_nodes, delay,
-            current.latest, gap, first, chosen,
-        )  # fmt: skip
+            current.latest, np.inf, 1.0, gap, first, chosen,
+        ) >= 0.0  # fmt: skip
         best = _best_gaps(st_, js, kidx, ranks.size, follow, e0, e1, n_nodes, current)
         assert found == np.isfinite(best)
         if found:
@@ -286,17 +302,19 @@ def _best_gaps(
     robots=st.integers(3, 30),
     objective=st.sampled_from(OBJECTIVES),
     anneal=st.sampled_from([0.0, 0.05]),
+    push=st.sampled_from([0.0, reinsert.PUSH]),
 )
 def test_the_search_only_improves_and_is_deterministic(
-    family: str, seed: int, robots: int, objective: str, anneal: float
+    family: str, seed: int, robots: int, objective: str, anneal: float, push: float
 ) -> None:
-    """The answer returned is never dearer than the start (annealed or not), valid, costs
-    what it says, and the same for the same seed when the steps are capped."""
+    """The answer returned is never dearer than the start (annealed or not, pushing held
+    robots past their latest or not), valid, costs what it says, and the same for the
+    same seed when the steps are capped."""
     ctx = _context(_request(family, seed, robots), objective)
     if ctx.problem.n_conflicts == 0:
         return
     start = plain_start(ctx)
-    config = reinsert.ReinsertConfig(robots=3, anneal=anneal)
+    config = reinsert.ReinsertConfig(robots=3, anneal=anneal, push=push)
     runs = []
     for _ in range(2):
         runs.append(reinsert.reinsert_search(ctx, start, np.inf, seed, config, max_steps=30))
