@@ -98,8 +98,12 @@ TOL = 1e-9  # delays closer than this are equal
 # known on one yardstick for all runs; cooling over all of the re-insertion turns): none
 # 0.8032 / 0.9012 and, again, 0.8005 / 0.9001; 0.01 0.8163 / 0.9193; 0.02 0.8074 / 0.9302
 # and, again, 0.8098 / 0.9296; 0.04 0.8043 / 0.9243. Cooling within each turn instead
-# (each search from its own start to its deadline) read 0.7953 / 0.9233 at 0.02.
-ANNEAL = 0.02
+# (each search from its own start to its deadline) read 0.7953 / 0.9233 at 0.02. Since
+# repairs may push held robots (PUSH; session 36, the same worlds, four seeds at 1 s and
+# two at 5 s, beside two same-code controls a run, references r5): 1 s 0.01 0.8672, 0.04
+# 0.8860 against 0.8766 / 0.8794; 5 s 0.04 0.9671 against 0.9540 / 0.9632 and, again,
+# 0.9605 against 0.9537 / 0.9528 (250 robots +0.01-0.02, 100 robots even or -0.005).
+ANNEAL = 0.04
 # A picked robot may pass a held partner first even where that delays the partner past
 # its latest, at a price per unit of delay past it of PUSH times the incumbent's mean slope
 # (:meth:`~service.core.evaluate.Evaluator.evaluate_with_latest`: the objective's rise
