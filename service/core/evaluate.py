@@ -630,7 +630,8 @@ class Evaluator:
             ValueError: the sample's constraint graph has a cycle.
         """
         least, latest = np.zeros(self.n_events + 1), np.empty(self.n_events + 1)  # (E+1,)
-        if not self._least_and_latest(assignments, sample, held, least, latest, latest.copy()):
+        slope = np.empty(self.n_events + 1)  # (E+1,) unread here
+        if not self._least_and_latest(assignments, sample, held, least, latest, slope):
             raise ValueError("the assignment's constraint graph has a cycle")
         return np.maximum(latest, evaluation.event_delay[sample])  # rounding: never below
 

@@ -522,7 +522,8 @@ def _repair(
 ) -> tuple[float, int]:
     """Put the picked robots back in ``order``, each on its passage past the robots
     placed so far (held ones, then those put back before it) -> (the picked robots' part
-    of the objective, -1), or (inf, the index in ``order`` of the first robot that had
+    of the objective plus the ``price`` of the pushes past a placed robot's latest, -1),
+    or (inf, the index in ``order`` of the first robot that had
     no passage: one fixed to pass a held robot first whose wait for robots put back
     before it made that too late). ``room`` must already count the picked robots'
     conflicts as exclusive; a robot's conflicts get it in turn, the ``preferred`` ones
@@ -873,9 +874,10 @@ def _best_repair(
     rng: np.random.Generator,
     orders: int,
 ) -> tuple[Assignments, np.ndarray] | None:
-    """The picked robots put back in ``orders`` random orders: the repair whose picked
-    robots' part of the objective is least, with its node positions (V,) (None: no order
-    found passages for all)."""
+    """The picked robots put back in ``orders`` random orders, pushing held robots past
+    their latest at ``price`` a unit: the repair whose picked robots' part of the
+    objective with that price paid is least, with its node positions (V,) (None: no
+    order found passages for all)."""
     shuffled = np.stack([rng.permutation(picked) for _ in range(orders)])  # (orders, k)
     cost, a_first, following, pos = _best_of_orders(
         st, shuffled, current.a_first, current.following, current.pos, current.delay,
@@ -898,9 +900,10 @@ def _best_of_orders(
     price: float,
 ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
     """:func:`_repair` in each order (robots that must pass a picked one first moved ahead,
-    :func:`_fixed_first`) -> the cheapest repair's picked part of the objective (inf:
-    none found passages for all), directions (M,), types (M,) and positions (V,); one
-    compiled call for the step's repairs (their Python around them took ~0.1 ms a step)."""
+    :func:`_fixed_first`) -> the cheapest repair's picked part of the objective with the
+    ``price`` of its pushes (inf: none found passages for all), directions (M,), types
+    (M,) and positions (V,); one compiled call for the step's repairs (their Python
+    around them took ~0.1 ms a step)."""
     picked = shuffled[0]
     freed = _freed(st, picked, a_first.size)
     freed &= st.fixed_type < 0  # a realized conflict's type stays, and its room taken
