@@ -745,10 +745,9 @@ def reinsert_search(
     weight = ctx.evaluator.objective_weights(ctx.objective)
     budget = ctx.cliques.budget.astype(np.int64)
     rng = np.random.default_rng(seed)
-    held = weight  # (E+1,) the objective's events, by weight
     rank = ctx.orientation.topological_rank(start.a_first[0])
     slope = np.empty(weight.size)
-    evaluation, latest = ctx.evaluator.evaluate_with_latest(start, held, slope)
+    evaluation, latest = ctx.evaluator.evaluate_with_latest(start, weight, slope)
     if rank is None or latest is None:
         raise ValueError("the answer to search from closes a cycle")
     current = _Incumbent.of(ctx, start, evaluation, rank, latest, slope)
@@ -779,7 +778,7 @@ def reinsert_search(
         )
         steps += 1
         below = current.cost + _tolerated(config.anneal * best_cost * (1.0 - cooled), rng)
-        kept = None if found is None else _kept(ctx, current, *found, held, below)
+        kept = None if found is None else _kept(ctx, current, *found, weight, below)
         if kept is None or kept.cost >= best_cost:
             stalled += 1
             current = current if kept is None else kept
@@ -1053,16 +1052,17 @@ def _kept(
     current: _Incumbent,
     found: Assignments,
     pos: np.ndarray,
-    held: np.ndarray,
+    weight: np.ndarray,
     below: float,
 ) -> _Incumbent | None:
     """``found`` (node positions ``pos`` (V,)) as the new incumbent, its latest delays
-    holding the ``held`` (E+1,) events, if the evaluator finds it cheaper than ``below``;
+    holding the objective's events (``weight`` (E+1,), which also weighs its slopes), if
+    the evaluator finds it cheaper than ``below``;
     None otherwise, and (a guard: repairs exclude both by construction) if ``pos`` is
     not a topological order of its node graph or a density clique holds more
     following-type conflicts than its budget."""
-    slope = np.empty(held.size)
-    evaluation, latest = ctx.evaluator.evaluate_with_latest(found, held, slope)
+    slope = np.empty(weight.size)
+    evaluation, latest = ctx.evaluator.evaluate_with_latest(found, weight, slope)
     if latest is None or not float(evaluation.costs[ctx.objective][0]) < below:
         return None
     if not _ordered(_Static.of(ctx), found.a_first[0], pos):
