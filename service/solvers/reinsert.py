@@ -8,8 +8,9 @@ prioritized planning: every other robot's times are held, and the picked robots 
 put back one after the other, in a random order (except that a robot that must pass
 another picked robot first comes before it), each on its cheapest passage past the
 robots already placed (:func:`_passage`, a dynamic programme over its events:
-milliseconds for all of them). Several orders are tried per step and the one whose
-picked robots finish earliest is evaluated by the one evaluator and kept when cheaper;
+milliseconds for all of them). Once the search is cold (below), several orders are
+tried per step (while it is hot, one: HOT_ORDERS) and the one whose picked robots finish
+earliest is evaluated by the one evaluator and kept when cheaper;
 an order in which a robot fixed to pass another first finds no passage is tried again
 with that robot first (RETRIES).
 
@@ -57,7 +58,8 @@ Keeping only cheaper repairs, it stalled: alone from the plans, on the generated
 warehouses of 100 and 250 robots, it read 0.76-0.94 of the best known after 2 s and
 barely more after 5 s with 2.5 times the steps (session 32), and two repairs a step on two
 threads (merged where their robots were disjoint) gained nothing once the first ~20
-steps had both improved. See ANNEAL for what annealing gained.
+steps had both improved. See ANNEAL for what annealing gained. While hot, a step tries
+one order (HOT_ORDERS): more steps of rougher repairs, which the annealing tolerates.
 
 **A plan** (:func:`planned_start`) is the same repair of the whole fleet from no robot
 placed: prioritized planning in one order, each robot on its exact passage past those
@@ -81,6 +83,7 @@ from service.solvers.tabu import plain_start
 
 __all__ = [
     "ANNEAL",
+    "HOT_ORDERS",
     "REINSERT_OBJECTIVES",
     "ReinsertConfig",
     "ReinsertResult",
@@ -118,6 +121,14 @@ ANNEAL = 0.04
 # of 16 or 32 for every fleet good on two-lane, bad on two-way ones. ``auto`` at 1 s
 # (four seeds, beside two controls): 0.8523 / 0.8537 -> PUSH 1 0.8684, 2 0.8889, 4 0.8761.
 PUSH = 2.0
+# Random orders tried per step while annealing is hot (ReinsertConfig.hot_orders; once
+# cold, ReinsertConfig.orders). Measured (session 37; ``auto`` through the dispatcher on
+# the 12 generated warehouses of 100 and 250 robots, references r5, beside same-code
+# controls in the same run): 1 s (four seeds) 1 while hot 0.9018 against 0.8854 / 0.8755
+# and, other seeds, 0.9049 against 0.8881; 5 s (two seeds) 0.9585 / 0.9676 against
+# 0.9529 / 0.9587 (250 robots +0.02, 100 robots -0.008). One order all the time: 1 s
+# 0.8993 / 0.9028 against 0.8867 / 0.8879, but 5 s 0.9444 against 0.9589 (four seeds).
+HOT_ORDERS = 1
 # Robots re-inserted per step at first, as a share of the fleet (ReinsertConfig.robots at
 # least, so fleets below 136 robots keep 8): a step's evaluation walks the whole fleet,
 # its repair only the picked robots, so bigger fleets afford more robots a step. Measured
@@ -154,8 +165,14 @@ class ReinsertConfig:
     # alternating): 3 orders 0.8831 / 0.8769 (100 robots) and 0.7796 / 0.7777 (250), 2
     # orders 0.8976 / 0.9006 and 0.7871 / 0.7932, 1 order 0.8966 and 0.7819; at 5 s (two
     # seeds) 2 and 3 even (0.9454 / 0.8854 against 0.9447 / 0.8844). 3 was chosen while
-    # ~45 % of the 250-robot steps found no repair at all (see RETRIES).
+    # ~45 % of the 250-robot steps found no repair at all (see RETRIES). Since repairs
+    # may push held robots (PUSH), this holds for a search once cold; while hot, see
+    # hot_orders.
     orders: int = 2
+    # Random orders tried per step while annealing is hot (a repair dearer than the
+    # current answer may still be kept): there a step's count matters more than how good
+    # its repair is. See HOT_ORDERS.
+    hot_orders: int = HOT_ORDERS
     # After steps without improvement that together freed stall_cover times the fleet,
     # neighbourhoods grow by ``growth`` (up to max_robots), as in LNS.
     stall_cover: float = 1.0
@@ -768,16 +785,18 @@ def reinsert_search(
             st, count, np.maximum(current.robot_delay, 0.0) + 1e-9, current.blocking,
             config.blocking_weight, rng.random(count),
         )  # fmt: skip
-        found = _best_repair(
-            st, current, picked, budget, weight, _price(config, current), rng, config.orders
-        )
         cooled = (  # the share of the cooling gone: by steps where they are capped
             min((time.monotonic() - warm_from) / max(cold_at - warm_from, 1e-9), 1.0)
             if max_steps is None
             else steps / max_steps
         )
+        temperature = config.anneal * best_cost * (1.0 - cooled)
+        orders = config.hot_orders if temperature > 0 else config.orders
+        found = _best_repair(
+            st, current, picked, budget, weight, _price(config, current), rng, orders
+        )
         steps += 1
-        below = current.cost + _tolerated(config.anneal * best_cost * (1.0 - cooled), rng)
+        below = current.cost + _tolerated(temperature, rng)
         kept = None if found is None else _kept(ctx, current, *found, weight, below)
         if kept is None or kept.cost >= best_cost:
             stalled += 1

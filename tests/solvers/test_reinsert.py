@@ -356,6 +356,28 @@ def test_annealing_keeps_dearer_answers_and_returns_the_cheapest_seen(
     assert kept and all(new < old for old, new in kept)  # cold: only cheaper ones
 
 
+@pytest.mark.parametrize(("anneal", "tried"), [(0.2, "hot"), (0.0, "cold")])
+def test_a_step_tries_fewer_orders_while_hot(
+    anneal: float, tried: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """While annealing is hot (capped steps cool by step, so a search that anneals is hot
+    to its last step) a step tries ``hot_orders`` orders; cold (no annealing), ``orders``."""
+    line = (DATA / "wh_25.jsonl").read_text().splitlines()[0]
+    ctx = _context(json.loads(line)["request"], "avg_completion")
+    orders: list[int] = []
+    original = reinsert._best_repair
+
+    def spy(*args: object) -> object:
+        orders.append(args[-1])
+        return original(*args)
+
+    monkeypatch.setattr(reinsert, "_best_repair", spy)
+    config = reinsert.ReinsertConfig(robots=3, anneal=anneal, orders=3, hot_orders=1)
+    found = reinsert.reinsert_search(ctx, plain_start(ctx), np.inf, 0, config, max_steps=20)
+    assert len(orders) == found.steps > 0
+    assert set(orders) == {1 if tried == "hot" else 3}
+
+
 def test_the_search_stops_at_its_deadline() -> None:
     line = (DATA / "wh_50.jsonl").read_text().splitlines()[0]
     ctx = _context(json.loads(line)["request"], "avg_completion")
