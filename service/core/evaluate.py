@@ -96,13 +96,31 @@ class ConstraintGraph:
 
 
 def costs_from_completion(completion: np.ndarray) -> dict[str, np.ndarray]:
-    """avg, max and sync completion from (S, R) completion times -> (S,) each."""
-    avg = completion.mean(axis=1)
+    """avg, max and sync completion from (S, R) completion times -> (S,) each, a row's
+    the same whatever the batch around it (see :func:`_row_sums`)."""
+    completion = np.ascontiguousarray(completion, dtype=np.float64)
+    ones = np.ones(completion.shape[1])
+    n_robots = max(completion.shape[1], 1)
+    avg = _row_sums(completion, ones) / n_robots
+    spread = _row_sums(np.abs(completion - avg[:, None]), ones) / n_robots
     return {
         "avg_completion": avg,
         "max_completion": completion.max(axis=1),
-        "sync_completion": avg + np.abs(completion - avg[:, None]).mean(axis=1),
+        "sync_completion": avg + spread,
     }
+
+
+@numba.njit(cache=True, nogil=True)
+def _row_sums(x: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """(S,) each row of ``x`` (S, N) weighed by ``weight`` (N,), summed in index order: the
+    same number for a row whatever the batch around it (a matrix product's summation order
+    depends on the batch's shape, and a sample's cost then differed in its last bit from
+    the same answer's alone)."""
+    out = np.zeros(x.shape[0])
+    for s in range(x.shape[0]):
+        for n in range(x.shape[1]):
+            out[s] += x[s, n] * weight[n]
+    return out
 
 
 @numba.njit(cache=True, nogil=True)
@@ -567,7 +585,7 @@ class Evaluator:
         problem = self.problem
         completion = problem.tp_time[problem.last_tp] + delay[:, self._last_event]  # (S, R)
         costs = costs_from_completion(completion)
-        costs["avg_delay"] = delay @ self._delay_weight
+        costs["avg_delay"] = _row_sums(delay, self._delay_weight)
         costs = {k: np.where(converged, costs[k], np.inf) for k in OBJECTIVES}
         return Evaluation(delay, completion, costs, converged)
 
