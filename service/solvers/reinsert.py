@@ -73,11 +73,13 @@ import time
 from dataclasses import dataclass
 from typing import NamedTuple
 
+import networkx as nx
 import numba
 import numpy as np
 
 from service.core.assignment import Assignments
 from service.core.evaluate import Evaluation
+from service.core.problem import Problem
 from service.solvers.registry import SolveContext, SolverOutput, register
 from service.solvers.tabu import plain_start
 
@@ -151,6 +153,9 @@ FLEET_SHARE = 1 / 16
 # robots parked in others' ways), 300 steps of 16 robots in 3 orders: without either,
 # 42-48 % of steps found no repair at all; with the room alone 10-38 %, with both 0-2 %.
 RETRIES = 3
+# Fleets of up to this many nodes get a plan's order bounds where fixed directions between
+# robots close cycles (a (V, V) table: 16 MB here; see _repair).
+REACH_MAX_NODES = 4000
 
 
 @dataclass(frozen=True)
@@ -314,6 +319,9 @@ def _passage(
     gap: np.ndarray,  # (n_nodes,) int, out: each node's gap among the sorted partner positions
     first: np.ndarray,  # (K,) bool, out: the robot passes first
     following: np.ndarray,  # (K,) bool, out: following-type
+    bound_node: np.ndarray,  # (B,) int, the robot's node (0: its first) of each order bound
+    bound_force: np.ndarray,  # (B,) int, +1 that node before the bound's, -1 after it
+    deadlines: bool,  # False: passing first sets no deadline (see _repair)
 ) -> float:
     """The robot's passage with the least last delay past its placed partners, whose
     times ``d`` are held (see the module), plus ``price`` per unit it delays a partner
@@ -321,8 +329,12 @@ def _passage(
     exists (fixed directions against held times). Gap g of a node: its partners at the
     g smallest distinct positions pass first (the partner of conflict i iff kidx[i] <
     g). Exact for the robot alone. Pushes only where the robot has one node (on the
-    generated warehouses every robot has one)."""
-    k = js.size
+    generated warehouses every robot has one).
+
+    Order bounds (B,, see :func:`_repair`; kidx[K + b] their nodes' ranks) bound a node's
+    gap as a fixed direction would, with no time attached. Without ``deadlines``, a
+    partner the robot passes first may be pushed past its latest, unpriced."""
+    k = js.size + bound_node.size
     # Each conflict's release (robot second) and deadline (robot first), at its type.
     rel_e = np.empty(k, dtype=np.int64)  # events of the robot's own: 0..N-1
     rel_v = np.full(k, -np.inf)
@@ -333,14 +345,21 @@ def _passage(
     # node's gap need not lead to the cheapest passage).
     past = price / max(own, 1e-300) if n_nodes == 1 else np.inf
     force = np.empty(k, dtype=np.int64)
-    for i in range(k):
+    for b in range(bound_node.size):  # at the node's first event (none: no bound)
+        i = js.size + b
+        force[i], rel_e[i], dl_e[i] = bound_force[b], ev_node.size, ev_node.size
+        for e in range(ev_node.size):
+            if ev_node[e] == bound_node[b]:
+                rel_e[i] = dl_e[i] = e
+                break
+    for i in range(js.size):
         j, t = js[i], 1 if follow[i] else 0
         force[i] = st.rc_force[j]
         rel_e[i] = st.own_target[j] - e0
         dl_e[i] = st.oth_source[t, j] - e0
         if st.own_live[j]:
             rel_v[i] = d[st.own_source[t, j]] + st.own_offset[t, j]
-        if st.oth_live[j]:
+        if st.oth_live[j] and deadlines:
             dl_v[i] = latest[st.oth_target[j]] - st.oth_offset[t, j]
     # least[g]: least delay so far with the current node in gap g; back[n, g]: the gap
     # of node n-1 that least[g] came from on entering node n. On the first node, where
@@ -352,7 +371,7 @@ def _passage(
     # While on the first node: up[g] / down[g + 1] lead to the nearest feasible gap at or
     # above / at or below g (m + 1 / -1 if none), so that scans skip infeasible gaps.
     up, down = np.arange(m + 2), np.arange(m + 2)
-    by_rel, by_dl = _by_event(rel_e, ev_node.size), _by_event(dl_e, ev_node.size)
+    by_rel, by_dl = _by_event(rel_e, ev_node.size + 1), _by_event(dl_e, ev_node.size + 1)
     r, t, current = 0, 0, 0
     for e in range(ev_node.size):
         while ev_node[e] > current:  # into the next node: its gap is at least the last's
@@ -411,7 +430,7 @@ def _passage(
                 delay = max(delay, rel_v[i])
         d[e0 + e] = delay
     # Directions; following-type only where the exclusive constraint would not hold.
-    for i in range(k):
+    for i in range(js.size):
         j = js[i]
         first[i] = kidx[i] >= gap[st.rc_node[j]]
         if first[i]:
@@ -536,6 +555,7 @@ def _repair(
     weight: np.ndarray,  # (E+1,) float, each event delay's weight in the objective
     preferred: np.ndarray,  # (M,) bool, conflicts given room for following-type first
     price: float,  # a unit of delay past a placed robot's latest (inf: never), see _passage
+    reach: np.ndarray,  # (V, V) bool, the fixed order's closure (see _fixed_reach), or (0, 0)
 ) -> tuple[float, int]:
     """Put the picked robots back in ``order``, each on its passage past the robots
     placed so far (held ones, then those put back before it) -> (the picked robots' part
@@ -548,11 +568,21 @@ def _repair(
     first then keeps the passage it had, which needed them; in turn by conflict alone,
     a robot that needed one of two conflicts sharing a clique's last room lost it on
     the generated warehouses, and with it every passage where it was fixed to pass
-    first)."""
+    first).
+
+    With ``reach`` (a plan where fixed directions between robots close cycles), each of
+    the robot's nodes also stays before every placed node it must precede in the fixed
+    order, through any robots, and after every one that must precede it: without, a
+    placed robot could have been put before another that it must follow through robots
+    not yet placed, leaving the robot between them no gap. A robot there that finds no
+    passage within the placed robots' times then takes one that ignores them (the
+    evaluation moves them): on such cycles a robot is often placed after robots it must
+    pass first, or that its bounds put after it, whose times it cannot meet."""
     placed = np.ones(st.rc_start.size - 1, dtype=np.bool_)
     placed[order] = False
     cost = 0.0
     for n_placed, r in enumerate(order):
+        bound_node, bound_force, bound_pos = _order_bounds(st, r, placed, pos, reach)
         lo, hi = st.rc_start[r], st.rc_start[r + 1]
         js = np.empty(hi - lo, dtype=np.int64)  # (K,) its slots with placed partners
         k = 0
@@ -561,9 +591,10 @@ def _repair(
                 js[k] = j
                 k += 1
         js = js[:k]
-        partner_pos = np.empty(k)
+        partner_pos = np.empty(k + bound_pos.size)  # the bounds' nodes after the partners'
         for i in range(k):
             partner_pos[i] = pos[st.rc_partner_node[js[i]]]
+        partner_pos[k:] = bound_pos
         follow = np.zeros(k, dtype=np.bool_)
         for first_pass in (True, False):  # room for the preferred conflicts first
             for i in range(k):
@@ -577,10 +608,13 @@ def _repair(
         first = np.empty(k, dtype=np.bool_)
         chosen = np.empty(k, dtype=np.bool_)
         ev_node = st.ev_node[e0:e1]
-        pushed = _passage(
-            st, js, kidx, ranks.size, follow, e0, ev_node, n_nodes, d, latest, price,
-            weight[e0:e1].sum(), gap, first, chosen,
-        )  # fmt: skip
+        pushed = -1.0
+        for deadlines in (True, False):  # without deadlines only for a plan's bounds
+            if pushed < 0 and (deadlines or reach.size > 0):
+                pushed = _passage(
+                    st, js, kidx, ranks.size, follow, e0, ev_node, n_nodes, d, latest, price,
+                    weight[e0:e1].sum(), gap, first, chosen, bound_node, bound_force, deadlines,
+                )  # fmt: skip
         if pushed < 0:
             return np.inf, n_placed
         cost += pushed
@@ -595,6 +629,40 @@ def _repair(
         for e in range(e0, e1):
             cost += weight[e] * d[e]
     return cost, -1
+
+
+@numba.njit(cache=True, nogil=True)
+def _order_bounds(
+    st: _Static, r: int, placed: np.ndarray, pos: np.ndarray, reach: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Robot r's order bounds from ``reach`` (V, V) (none where it is (0, 0)): for each of
+    its nodes and each placed robot's node one must precede in the fixed order (-> its
+    node (0: its first) (B,), +1 where r's node comes first else -1 (B,), the placed
+    node's position (B,))."""
+    first = st.robot_start[r]
+    bound_node = np.empty(0, dtype=np.int64)
+    bound_force = np.empty(0, dtype=np.int64)
+    bound_pos = np.empty(0)
+    if reach.shape[0] == 0:
+        return bound_node, bound_force, bound_pos
+    for fill in range(2):  # count, then fill
+        n = 0
+        for v in range(first, st.robot_start[r + 1]):
+            for q_robot in range(placed.size):
+                if not placed[q_robot] or q_robot == r:
+                    continue
+                for q in range(st.robot_start[q_robot], st.robot_start[q_robot + 1]):
+                    if reach[v, q] or reach[q, v]:
+                        if fill:
+                            bound_node[n] = v - first
+                            bound_force[n] = 1 if reach[v, q] else -1
+                            bound_pos[n] = pos[q]
+                        n += 1
+        if not fill:
+            bound_node = np.empty(n, dtype=np.int64)
+            bound_force = np.empty(n, dtype=np.int64)
+            bound_pos = np.empty(n)
+    return bound_node, bound_force, bound_pos
 
 
 @numba.njit(cache=True, nogil=True)
@@ -838,6 +906,7 @@ def planned_start(
     rng = np.random.default_rng(seed)
     every = np.arange(p.n_robots)
     fixed = _fixed_between(_Static.of(ctx), every, True)
+    reach = _plan_reach(ctx, fixed)
     weight = ctx.evaluator.objective_weights(ctx.objective)
     found = None
     for k in range(orders):
@@ -849,7 +918,7 @@ def planned_start(
             order = np.argsort(free_end, kind="stable")
         else:
             order = rng.permutation(p.n_robots)
-        plan = _plan(ctx, order, fixed, weight)
+        plan = _plan(ctx, order, fixed, weight, reach)
         if plan is None:
             continue
         cost = float(ctx.evaluator.evaluate(plan).costs[ctx.objective][0])
@@ -863,12 +932,14 @@ def _plan(
     order: np.ndarray,
     fixed: tuple[np.ndarray, np.ndarray],
     weight: np.ndarray,
+    reach: np.ndarray,
 ) -> Assignments | None:
     """Every robot put back in ``order`` (R,), robots fixed to pass another first (the
     arcs ``fixed`` of :func:`_fixed_between` over the whole fleet) moved ahead of it
     (:func:`_fixed_first`), each on its passage past those placed before it (None: some
     robot had none, against fixed directions); ``weight`` (E+1,) as
-    :meth:`~service.core.evaluate.Evaluator.objective_weights`."""
+    :meth:`~service.core.evaluate.Evaluator.objective_weights`; ``reach`` as
+    :func:`_repair`."""
     p, st = ctx.problem, _Static.of(ctx)
     following = p.fixed_type == 1  # (M,) realized types stay, and take their room
     room = ctx.cliques.budget.astype(np.int64) - ctx.cliques.following_counts(following[None])[0]
@@ -877,9 +948,35 @@ def _plan(
     pos = np.arange(p.n_nodes, dtype=np.float64)  # (V,) increasing along every path
     cost, _ = _repair(
         _fixed_first(order.astype(np.int64), *fixed), st, delay, delay.copy(), pos, room,
-        a_first, following, weight, following.copy(), np.inf,
+        a_first, following, weight, following.copy(), np.inf, reach,
     )  # fmt: skip
     return Assignments.single(a_first, following) if np.isfinite(cost) else None
+
+
+def _plan_reach(ctx: SolveContext, fixed: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    """What a plan bounds its robots by (see :func:`_repair`): :func:`_fixed_reach` where
+    the fixed directions between robots (``fixed``, as :func:`_fixed_between`) close a
+    cycle and the fleet has at most REACH_MAX_NODES nodes, else (0, 0) (no bounds)."""
+    robots = nx.DiGraph(zip(*(a.tolist() for a in fixed), strict=True))
+    if ctx.problem.n_nodes > REACH_MAX_NODES or nx.is_directed_acyclic_graph(robots):
+        return np.zeros((0, 0), dtype=bool)
+    return _fixed_reach(ctx.problem)
+
+
+def _fixed_reach(p: Problem) -> np.ndarray:
+    """(V, V) bool: node u must come before node v (reach[u, v]) by the fixed directions
+    and the robots' paths, through any robots (the transitive closure of that order)."""
+    _, first, second = p.forced_arcs
+    nodes = nx.DiGraph(zip(first.tolist(), second.tolist(), strict=True))
+    nodes.add_nodes_from(range(p.n_nodes))
+    along = np.flatnonzero(p.node_robot[:-1] == p.node_robot[1:])  # (.,) v -> v + 1 on a path
+    nodes.add_edges_from(zip(along.tolist(), (along + 1).tolist(), strict=True))
+    reach = np.zeros((p.n_nodes, p.n_nodes), dtype=bool)
+    for v in reversed(list(nx.topological_sort(nodes))):
+        for w in nodes.successors(v):
+            reach[v] |= reach[w]
+            reach[v, w] = True
+    return reach
 
 
 def _best_repair(
@@ -939,7 +1036,7 @@ def _best_of_orders(
             mine_pos = pos.copy()
             cost, failed = _repair(
                 order, st, delay.copy(), latest.copy(), mine_pos, room.copy(), mine_a_first,
-                mine_following, weight, following, price,
+                mine_following, weight, following, price, np.zeros((0, 0), dtype=np.bool_),
             )  # fmt: skip
             if failed < 0:
                 break

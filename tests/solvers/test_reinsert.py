@@ -29,6 +29,8 @@ from tests.reference import fix_directions, tiny_request
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "conformance"
 OBJECTIVES = ("avg_completion", "avg_delay")
+NO_REACH = np.zeros((0, 0), dtype=bool)  # a repair without order bounds
+NO_BOUND = np.zeros(0, dtype=np.int64)
 
 
 def _request(family: str, seed: int, robots: int) -> dict:
@@ -111,7 +113,7 @@ def test_every_repair_is_valid_and_its_times_are_a_schedule_of_it(
     weight = ctx.evaluator.objective_weights(ctx.objective)
     cost, failed = reinsert._repair(
         order, static, delay, latest, pos, room, a_first, following, weight, current.following,
-        price,
+        price, NO_REACH,
     )  # fmt: skip
     if not np.isfinite(cost):  # only where fixed directions leave a robot no passage
         robot = order[failed]
@@ -123,7 +125,7 @@ def test_every_repair_is_valid_and_its_times_are_a_schedule_of_it(
         alone = reinsert._repair(
             order[failed : failed + 1], static, current.delay.copy(), current.latest.copy(),
             current.pos.copy(), room, current.a_first.copy(), current.following & ~mine, weight,
-            current.following, price,
+            current.following, price, NO_REACH,
         )  # fmt: skip
         assert alone[1] == -1
         return
@@ -216,7 +218,7 @@ def test_a_lone_robot_never_finishes_later_than_it_did(
         a_first, following = current.a_first.copy(), current.following & ~freed
         cost, failed = reinsert._repair(
             order, static, current.delay.copy(), current.latest.copy(), current.pos.copy(),
-            room, a_first, following, weight, current.following, price,
+            room, a_first, following, weight, current.following, price, NO_REACH,
         )  # fmt: skip
         assert failed == -1
         had = float(weight[_events_of(ctx, order)] @ current.delay[_events_of(ctx, order)])
@@ -252,7 +254,7 @@ def test_a_passage_is_the_best_of_every_choice_of_gaps(family: str, seed: int, r
         first, chosen = np.empty(js.size, dtype=bool), np.empty(js.size, dtype=bool)
         found = reinsert._passage(
             st_, js, kidx, ranks.size, follow, e0, st_.ev_node[e0:e1], n_nodes, delay,
-            current.latest, np.inf, 1.0, gap, first, chosen,
+            current.latest, np.inf, 1.0, gap, first, chosen, NO_BOUND, NO_BOUND, True,
         ) >= 0.0  # fmt: skip
         best = _best_gaps(st_, js, kidx, ranks.size, follow, e0, e1, n_nodes, current)
         assert found == np.isfinite(best)
@@ -452,24 +454,33 @@ def test_the_search_stops_where_nobody_waits() -> None:
 def test_a_plan_of_the_whole_fleet_is_valid_and_its_first_robot_never_waits(
     ctx: SolveContext, seed: int
 ) -> None:
-    """Every robot put back from none placed, in a random order: the plan passes the
-    checker, and the robot put back first (none ahead of it fixed to pass it) finishes
-    at its free time; the cheapest of several plans costs what the evaluator says."""
+    """Every robot put back from none placed, in a random order: bounded by the fixed
+    order's closure, a plan is always found and valid; as ``auto`` plans, the plan passes
+    the checker, and where no bounds were needed the robot put back first (none ahead of
+    it fixed to pass it) finishes at its free time; the cheapest of several plans costs
+    what the evaluator says."""
     problem, objective = ctx.problem, ctx.objective
     if problem.n_conflicts == 0:
         return
     order = np.random.default_rng(seed).permutation(problem.n_robots)
     static = reinsert._Static.of(ctx)
     fixed = reinsert._fixed_between(static, np.arange(problem.n_robots), True)
-    plan = reinsert._plan(ctx, order, fixed, ctx.evaluator.objective_weights(ctx.objective))
+    weight = ctx.evaluator.objective_weights(ctx.objective)
+    bounded = reinsert._plan(ctx, order, fixed, weight, reinsert._fixed_reach(problem))
+    assert bounded is not None  # with the fixed order's closure, always
+    checks = check(problem, ctx.cliques, bounded)
+    assert checks.acyclic[0] and checks.density[0] and checks.forced[0]
+    reach = reinsert._plan_reach(ctx, fixed)
+    plan = reinsert._plan(ctx, order, fixed, weight, reach)
     if plan is None:  # only where fixed directions leave a robot no passage
-        assert problem.has_forced
+        assert problem.has_forced and reach.size == 0
         return
     checks = check(problem, ctx.cliques, plan)
     assert checks.acyclic[0] and checks.density[0] and checks.forced[0]
     first = reinsert._fixed_first(order, *fixed)[0]
     completion = ctx.evaluator.evaluate(plan).completion[0]
-    assert completion[first] == pytest.approx(problem.free_time()[first])
+    if reach.size == 0:  # else a robot fixed to pass it first may push it
+        assert completion[first] == pytest.approx(problem.free_time()[first])
     found = reinsert.planned_start(ctx, 4, seed, np.inf)
     assert found is not None or problem.has_forced
     if found is None:
@@ -478,6 +489,40 @@ def test_a_plan_of_the_whole_fleet_is_valid_and_its_first_robot_never_waits(
     assert cost == float(ctx.evaluator.evaluate(best).costs[objective][0])
     checks = check(problem, ctx.cliques, best)
     assert checks.acyclic[0] and checks.density[0] and checks.forced[0]
+
+
+def test_a_plan_is_found_where_fixed_directions_between_robots_close_cycles() -> None:
+    """A 12-robot warehouse with robots parked in others' ways (generated, ``wh_parked``)
+    whose fixed directions between robots close cycles through robots of several nodes:
+    the fixed order's closure is a strict partial order holding every fixed direction and
+    path; without it no plan is found, with it every order gives a valid one."""
+    request = json.loads((DATA.parent / "parked_cycles_12.json").read_text())
+    ctx = _context(request, "avg_completion")
+    problem, static = ctx.problem, reinsert._Static.of(ctx)
+    fixed = reinsert._fixed_between(static, np.arange(problem.n_robots), True)
+    robots = nx.DiGraph(zip(*(a.tolist() for a in fixed), strict=True))
+    assert not nx.is_directed_acyclic_graph(robots)
+    reach = reinsert._plan_reach(ctx, fixed)
+    assert reach.shape == (problem.n_nodes, problem.n_nodes)
+    _, first, second = problem.forced_arcs
+    assert reach[first, second].all()
+    along = np.flatnonzero(problem.node_robot[:-1] == problem.node_robot[1:])
+    assert reach[along, along + 1].all()
+    assert not reach.diagonal().any()  # acyclic
+    closed = reach.astype(np.int64) @ reach.astype(np.int64) > 0
+    assert not (closed & ~reach).any()  # transitive
+    weight = ctx.evaluator.objective_weights(ctx.objective)
+    for seed in range(5):
+        order = np.random.default_rng(seed).permutation(problem.n_robots)
+        assert reinsert._plan(ctx, order, fixed, weight, np.zeros((0, 0), dtype=bool)) is None
+        plan = reinsert._plan(ctx, order, fixed, weight, reach)
+        assert plan is not None
+        checks = check(problem, ctx.cliques, plan)
+        assert checks.acyclic[0] and checks.density[0] and checks.forced[0]
+    found = reinsert.planned_start(ctx, 4, 0, np.inf)
+    assert found is not None
+    assert found[1] == float(ctx.evaluator.evaluate(found[0]).costs["avg_completion"][0])
+    assert found[1] < float(ctx.evaluator.evaluate(plain_start(ctx)).costs["avg_completion"][0])
 
 
 @settings(max_examples=100, deadline=None, derandomize=True)
