@@ -63,7 +63,10 @@ one order (HOT_ORDERS): more steps of rougher repairs, which the annealing toler
 
 **A plan** (:func:`planned_start`) is the same repair of the whole fleet from no robot
 placed: prioritized planning in one order, each robot on its exact passage past those
-before it; ``auto`` starts its large problems from the cheapest of a few.
+before it; ``auto`` starts its large problems from the cheapest of a few. Where fixed
+directions between robots close cycles (robots parked in others' ways), each placement is
+also bounded by the transitive closure of the fixed node order (:func:`_plan_reach`,
+:func:`_repair`): without, no plan was found on most such warehouses.
 """
 
 from __future__ import annotations
