@@ -584,8 +584,11 @@ def _repair(
     placed = np.ones(st.rc_start.size - 1, dtype=np.bool_)
     placed[order] = False
     cost = 0.0
+    bound_node, bound_force = np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64)
+    bound_pos = np.empty(0)  # no bounds (a search's repair): none found per robot
     for n_placed, r in enumerate(order):
-        bound_node, bound_force, bound_pos = _order_bounds(st, r, placed, pos, reach)
+        if reach.size > 0:
+            bound_node, bound_force, bound_pos = _order_bounds(st, r, placed, pos, reach)
         lo, hi = st.rc_start[r], st.rc_start[r + 1]
         js = np.empty(hi - lo, dtype=np.int64)  # (K,) its slots with placed partners
         k = 0
@@ -638,16 +641,13 @@ def _repair(
 def _order_bounds(
     st: _Static, r: int, placed: np.ndarray, pos: np.ndarray, reach: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Robot r's order bounds from ``reach`` (V, V) (none where it is (0, 0)): for each of
-    its nodes and each placed robot's node one must precede in the fixed order (-> its
-    node (0: its first) (B,), +1 where r's node comes first else -1 (B,), the placed
-    node's position (B,))."""
+    """Robot r's order bounds from ``reach`` (V, V): for each of its nodes and each placed
+    robot's node one must precede in the fixed order (-> its node (0: its first) (B,), +1
+    where r's node comes first else -1 (B,), the placed node's position (B,))."""
     first = st.robot_start[r]
     bound_node = np.empty(0, dtype=np.int64)
     bound_force = np.empty(0, dtype=np.int64)
     bound_pos = np.empty(0)
-    if reach.shape[0] == 0:
-        return bound_node, bound_force, bound_pos
     for fill in range(2):  # count, then fill
         n = 0
         for v in range(first, st.robot_start[r + 1]):
