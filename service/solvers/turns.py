@@ -17,6 +17,16 @@ the search that pays on a fleet gets the time. Measured (docs/benchmarks.md,
 "Re-insertion and priority search in turns"): ``auto`` on the two-way warehouses of 250
 robots 0.61 -> 0.73 at 1 s and 0.79 -> 0.92 at 5 s against re-insertion alone; a fixed
 60/40 split read 0.68 and 0.89.
+
+Priority search takes its part only once re-insertion's annealing is cold (the first
+COOLED_SHARE of the time, the turns are re-insertion's alone, each from the best so far):
+its moves paid there no more than the re-insertion steps they took the time of. Measured
+(session 38; ``auto`` through the dispatcher beside same-code controls, docs/benchmarks.md
+"Priority search once re-insertion is cold"): generated warehouses of 250 robots 1 s
++0.009 / +0.014 (four seeds), 5 s +0.004 / -0.003 (two); of 100 robots even at 1 s,
++0.003 / +0.011 at 5 s; kinds not tuned on (wh_mixed, wh_one_way of 250) +0.035 at 1 s,
++0.021 at 5 s; wh_parked even at 1 s, +0.017 at 5 s. Without priority search at all:
++0.015 at 1 s but -0.005 at 5 s (250 robots).
 """
 
 from __future__ import annotations
@@ -59,6 +69,9 @@ class TurnsConfig:
     # Re-insertion's annealing cools over this share of the time given, and searches cold
     # for the rest (see COOLED_SHARE).
     cooling_share: float = COOLED_SHARE
+    # Priority search takes turns from the start, not only once re-insertion is cold (see
+    # the module: measured worse at 1 s).
+    priority_while_hot: bool = False
 
 
 class TurnsResult(NamedTuple):
@@ -83,20 +96,21 @@ def take_turns(
     now = time.monotonic()
     turn_s = min(config.turn_s, config.turn_share * (deadline - now))
     cooling = (now, now + config.cooling_share * (deadline - now))  # then it searches cold
-    while time.monotonic() < deadline:
-        began, before = time.monotonic(), cost
+    while (began := time.monotonic()) < deadline:
+        before, turn_seed, turns = cost, seed + turns, turns + 1
+        # While re-insertion is hot, the turns are its own (see the module).
+        split = share if config.priority_while_hot or began >= cooling[1] else 0.0
         found = reinsert_search(
-            ctx, best, min(deadline, began + (1 - share) * turn_s), seed + turns, cooling=cooling
+            ctx, best, min(deadline, began + (1 - split) * turn_s), turn_seed, cooling=cooling
         )
         best, cost = found.best, found.cost
         middle, between = time.monotonic(), cost
-        left = min(share * turn_s, deadline - middle)
+        left = min(split * turn_s, deadline - middle)
         if left <= 0:
-            break
+            continue
         ranks = answer_ranks(ctx, best)
         # Given less than PriorityConfig.refit_min_s (0.5 s) here, it refits no types.
-        best, cost, _ = priority_search(ctx, left, seed + turns, start=(ranks, best, cost))
-        turns += 1
+        best, cost, _ = priority_search(ctx, left, turn_seed, start=(ranks, best, cost))
         gains = (before - between, between - cost)
         share = _next_share(config, share, gains, (middle - began, time.monotonic() - middle))
     return TurnsResult(best, cost, turns)

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import time
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -120,3 +121,31 @@ def test_reinsertion_cools_over_the_first_share_of_the_turns(
     warm_from, cold_at = spans[0]
     assert begin <= warm_from < begin + 0.01
     assert abs((cold_at - warm_from) - 0.25 * (begin + 0.4 - warm_from)) < 1e-9
+
+
+def test_priority_search_waits_until_reinsertion_is_cold(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """While re-insertion's annealing is hot, the turns are re-insertion's alone; once it
+    is cold, priority search takes its part of each turn (and from the start where
+    ``priority_while_hot``)."""
+    calls: list[float] = []
+
+    def recorded(*args, **kwargs):
+        calls.append(time.monotonic())
+        return priority_search(*args, **kwargs)
+
+    monkeypatch.setattr(turns, "priority_search", recorded)
+    line = (DATA / "wh_50.jsonl").read_text().splitlines()[0]
+    ctx = _context(json.loads(line)["request"], "avg_completion")
+    start = plain_start(ctx)
+    cost = float(ctx.evaluator.evaluate(start).costs["avg_completion"][0])
+    config = TurnsConfig(turn_s=0.05, cooling_share=0.5)
+    begin = time.monotonic()
+    found = take_turns(ctx, start, cost, begin + 0.6, 0, config)
+    assert calls and min(calls) >= begin + 0.3  # cold from half of the time on
+    assert found.turns > len(calls)  # re-insertion alone in the hot turns
+    calls.clear()
+    begin = time.monotonic()
+    take_turns(ctx, start, cost, begin + 0.6, 0, replace(config, priority_while_hot=True))
+    assert calls and min(calls) < begin + 0.1
