@@ -140,6 +140,8 @@ def test_priority_search_waits_until_reinsertion_is_cold(
     ctx = _context(json.loads(line)["request"], "avg_completion")
     start = plain_start(ctx)
     cost = float(ctx.evaluator.evaluate(start).costs["avg_completion"][0])
+    reinsert_search(ctx, start, np.inf, 0, max_steps=2)  # compiled before the clock runs
+    priority_search(ctx, 0.01, 0, start=(answer_ranks(ctx, start), start, cost))
     config = TurnsConfig(turn_s=0.05, cooling_share=0.5)
     begin = time.monotonic()
     found = take_turns(ctx, start, cost, begin + 0.6, 0, config)
