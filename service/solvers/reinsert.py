@@ -81,6 +81,7 @@ import numba
 import numpy as np
 
 from service.core.assignment import Assignments
+from service.core.digraph import is_dag, path_arcs
 from service.core.evaluate import Evaluation
 from service.core.problem import Problem
 from service.solvers.registry import SolveContext, SolverOutput, register
@@ -960,10 +961,10 @@ def _plan_reach(ctx: SolveContext, fixed: tuple[np.ndarray, np.ndarray]) -> np.n
     """What a plan bounds its robots by (see :func:`_repair`): :func:`_fixed_reach` where
     the fixed directions between robots (``fixed``, as :func:`_fixed_between`) close a
     cycle and the fleet has at most REACH_MAX_NODES nodes, else (0, 0) (no bounds)."""
-    robots = nx.DiGraph(zip(*(a.tolist() for a in fixed), strict=True))
-    if ctx.problem.n_nodes > REACH_MAX_NODES or nx.is_directed_acyclic_graph(robots):
+    p = ctx.problem
+    if p.n_nodes > REACH_MAX_NODES or is_dag(p.n_robots, *fixed):
         return np.zeros((0, 0), dtype=bool)
-    return _fixed_reach(ctx.problem)
+    return _fixed_reach(p)
 
 
 def _fixed_reach(p: Problem) -> np.ndarray:
@@ -972,8 +973,7 @@ def _fixed_reach(p: Problem) -> np.ndarray:
     _, first, second = p.forced_arcs
     nodes = nx.DiGraph(zip(first.tolist(), second.tolist(), strict=True))
     nodes.add_nodes_from(range(p.n_nodes))
-    along = np.flatnonzero(p.node_robot[:-1] == p.node_robot[1:])  # (.,) v -> v + 1 on a path
-    nodes.add_edges_from(zip(along.tolist(), (along + 1).tolist(), strict=True))
+    nodes.add_edges_from(zip(*(a.tolist() for a in path_arcs(p.node_robot)), strict=True))
     reach = np.zeros((p.n_nodes, p.n_nodes), dtype=bool)
     for v in reversed(list(nx.topological_sort(nodes))):
         for w in nodes.successors(v):
