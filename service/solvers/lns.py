@@ -177,7 +177,8 @@ class _Fleet:
         event_robot = p.tp_robot[p.events]  # (E,) sorted: events go by robot
         event_start = np.searchsorted(event_robot, np.arange(n_robots + 1))
         grid = Evaluator(replace(p, tp_time=ti / scale))
-        slots = time_slots(p, ti, np.flatnonzero(~p.realized))
+        domains = literal_domains(p, ctx.cliques.forbidden())
+        slots = time_slots(p, ti, np.flatnonzero(~p.realized)).typed(*domains[2:])
         waiter = event_robot[slots.target]  # (S,) targets are events (pair entries)
         return cls(
             conf_robots,
@@ -190,7 +191,7 @@ class _Fleet:
             grid,
             grid.objective_weights(ctx.objective) > 0,
             delay_weights(p),
-            literal_domains(p, ctx.cliques.forbidden()),
+            domains,
             slots,
             np.stack([waiter, conf_robots[slots.conflict].sum(axis=1) - waiter], axis=1),
         )
@@ -348,7 +349,8 @@ class _Neighbourhood:
         self._budgets(ctx, fleet, current, f_lit)
         add_path_order(model, delay_var, events[~np.isin(events, fleet.event_start[robots])] - 1)
         live = self.conflicts[~problem.realized[self.conflicts]]
-        add_waits(model, time_slots(problem, fleet.ti, live), a_lit, f_lit, delays)
+        slots = time_slots(problem, fleet.ti, live).typed(*fleet.domains[2:])
+        add_waits(model, slots, a_lit, f_lit, delays)
 
         # Objective: the picked robots' part (the held robots' is a constant).
         if ctx.objective == "avg_completion":

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from functools import cache
 from typing import Any
 
@@ -11,10 +12,19 @@ import pytest
 
 from service.core.assignment import Assignments
 from service.core.check import check
+from service.core.evaluate import Evaluator
 from service.core.problem import problem_from_request
 from service.core.schemas import OBJECTIVES, Objective, ScheduleRequest
 from service.learning.generate import small_problem, stitched_problem
-from service.solvers.exact import build_seconds, exact, solve, top_assignments
+from service.solvers.exact import (
+    build_seconds,
+    exact,
+    integer_times,
+    literal_domains,
+    solve,
+    time_slots,
+    top_assignments,
+)
 from service.solvers.fcfs import fcfs
 from service.solvers.registry import SolveContext
 from tests.reference import (
@@ -89,6 +99,38 @@ def test_tiny_problems_cover_what_matters() -> None:
     assert binding >= 10
     assert limits >= 10
     assert following_wins >= 10
+    assert sum(bool(_context(tiny_request(s)).cliques.forbidden().any()) for s in TINY_SEEDS) >= 10
+
+
+@pytest.mark.parametrize("seed", TINY_SEEDS)
+def test_typed_slots_bind_as_all_slots_do(seed: int) -> None:
+    """Dropping the rows a conflict's type domain makes redundant (never following-type:
+    its following-level rows; always following-type, as realized ones of a re-schedule
+    are: its exclusive-level rows) leaves every event's least delay behind its waits as
+    it was, for any assignment the domains allow."""
+    ctx = _context(tiny_request(seed))
+    p = ctx.problem
+    scale, ti, _ = integer_times(p)
+    grid = Evaluator(replace(p, tp_time=ti / scale))
+    _, _, f_lo, f_hi = literal_domains(p, ctx.cliques.forbidden())
+    rng = np.random.default_rng(seed)
+    f_lo = np.where(rng.random(p.n_conflicts) < 0.3, f_hi, f_lo)  # some always following
+    every = time_slots(p, ti, np.arange(p.n_conflicts))
+    typed = every.typed(f_lo, f_hi)
+    assert typed.conflict.size < every.conflict.size or (f_lo == f_hi).sum() == 0
+    for _ in range(8):
+        a_first = rng.random(p.n_conflicts) < 0.5
+        following = np.where(f_lo == f_hi, f_lo == 1, rng.random(p.n_conflicts) < 0.5)
+        delay = np.rint(
+            grid.evaluate(Assignments.single(a_first, following)).event_delay[0] * scale
+        )
+        waits = []
+        for slots in (every, typed):
+            bound = np.zeros(delay.size)  # (E+1,) the most each event waits for
+            on = slots.active(a_first, following)
+            np.maximum.at(bound, slots.target[on], delay[slots.source[on]] + slots.offset[on])
+            waits.append(bound)
+        np.testing.assert_array_equal(waits[0], waits[1])
 
 
 @pytest.mark.parametrize("objective", OBJECTIVES)
