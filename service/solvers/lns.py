@@ -505,27 +505,40 @@ def _without_shortcuts(
     starts: np.ndarray, tails: np.ndarray, heads: np.ndarray, n_nodes: int
 ) -> tuple[np.ndarray, np.ndarray]:
     """The arcs (grouped by tail, in ``starts`` order) without those that two others imply
-    (u -> w where u -> v -> w): fewer constraints, the same order."""
-    first = np.zeros(n_nodes + 1, dtype=np.int64)  # arcs of tail u: first[u]:last[u]
-    last = np.zeros(n_nodes + 1, dtype=np.int64)
-    k = 0
-    for i in range(starts.size):
-        u = starts[i]
-        first[u] = k
-        while k < tails.size and tails[k] == u:
-            k += 1
-        last[u] = k
-    implied = np.zeros(n_nodes, dtype=np.int64) - 1
+    (u -> w where u -> v -> w): fewer constraints, the same order.
+
+    Each node's heads as a bitset: a tail's implied heads are the union of its heads'
+    sets, S / 64 words an arc. Walking each head's heads instead grew as S^3 on dense
+    boundaries: 5 ms of a 25-ms step on 250-robot two-way warehouses (4 robots picked,
+    ~240 boundary nodes linked nearly all to all)."""
+    index = np.full(n_nodes, -1, dtype=np.int64)  # (V,) each node's bit, -1: none
+    count = 0
+    for nodes in (starts, heads):
+        for v in nodes:
+            if index[v] < 0:
+                index[v] = count
+                count += 1
+    words = (count + 63) // 64
+    out = np.zeros((count, words), dtype=np.uint64)  # (N, words) each node's heads
+    for k in range(tails.size):
+        j = index[heads[k]]
+        out[index[tails[k]], j // 64] |= np.uint64(1) << np.uint64(j % 64)
     keep = np.ones(tails.size, dtype=np.bool_)
-    for i in range(starts.size):
-        u = starts[i]
-        for j in range(first[u], last[u]):
-            v = heads[j]
-            for jj in range(first[v], last[v]):
-                implied[heads[jj]] = u
-        for j in range(first[u], last[u]):
-            if implied[heads[j]] == u:
-                keep[j] = False
+    implied = np.zeros(words, dtype=np.uint64)
+    first = 0
+    while first < tails.size:  # one tail's arcs at a time
+        last = first
+        while last < tails.size and tails[last] == tails[first]:
+            last += 1
+        implied[:] = 0
+        for k in range(first, last):
+            v = index[heads[k]]
+            for word in range(words):
+                implied[word] |= out[v, word]
+        for k in range(first, last):
+            j = index[heads[k]]
+            keep[k] = (implied[j // 64] >> np.uint64(j % 64)) & np.uint64(1) == 0
+        first = last
     return tails[keep], heads[keep]
 
 
