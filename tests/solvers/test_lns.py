@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 
 from service.core.assignment import Assignments
 from service.core.check import check
-from service.core.problem import problem_from_request
+from service.core.problem import Problem, problem_from_request
 from service.core.schemas import ScheduleRequest
 from service.learning.generate import small_problem, stitched_problem
 from service.solvers import lns
@@ -66,6 +66,19 @@ def test_pruning_implied_arcs_keeps_reachability(n: int, density: float, seed: i
     kept_tails, kept_heads = lns._without_shortcuts(starts, tails, heads, n)
     assert kept_tails.size <= tails.size
     assert np.array_equal(_closure(n, tails, heads), _closure(n, kept_tails, kept_heads))
+
+
+def _node_graph(problem: Problem, a_first: np.ndarray) -> nx.DiGraph:
+    """The node graph of directions ``a_first`` (M,): path arcs, each conflict from the
+    side passing first."""
+    graph = nx.DiGraph()
+    graph.add_nodes_from(range(problem.n_nodes))
+    along = np.flatnonzero(problem.node_robot[1:] == problem.node_robot[:-1])
+    graph.add_edges_from(zip(along.tolist(), (along + 1).tolist(), strict=True))
+    tails = np.where(a_first, problem.conf_a, problem.conf_b)
+    heads = np.where(a_first, problem.conf_b, problem.conf_a)
+    graph.add_edges_from(zip(tails.tolist(), heads.tolist(), strict=True))
+    return graph
 
 
 def _request(family: str, seed: int, robots: int) -> dict:
@@ -139,13 +152,15 @@ def test_the_held_graph_links_each_boundary_node_to_the_first_ones_it_reaches(
     robots=st.integers(3, 30),
     picked=st.integers(1, 6),
     objective=st.sampled_from(lns.LNS_OBJECTIVES),
+    held_in_order=st.booleans(),
 )
 def test_every_sub_problem_answer_is_valid_and_no_worse(
-    family: str, seed: int, robots: int, picked: int, objective: str
+    family: str, seed: int, robots: int, picked: int, objective: str, held_in_order: bool
 ) -> None:
     """Whatever robots are freed, the sub-problem's answer passes the checker (cycles
     through held robots included: no answer needs rejecting) and costs no more than the
-    answer it started from (up to the integer time grid)."""
+    answer it started from (up to the integer time grid), with the held robots' nodes
+    linked by the held graph or kept in the incumbent's order."""
     ctx = _context(_request(family, seed, robots), objective)
     problem = ctx.problem
     if problem.n_conflicts == 0:
@@ -155,13 +170,18 @@ def test_every_sub_problem_answer_is_valid_and_no_worse(
     chosen = rng.choice(problem.n_robots, size=min(picked, problem.n_robots), replace=False)
     fleet = lns._Fleet.of(ctx)
     current = lns._Incumbent.start(ctx, fleet, start)
-    neighbourhood = lns._Neighbourhood(ctx, fleet, np.sort(chosen), current)
+    neighbourhood = lns._Neighbourhood(ctx, fleet, np.sort(chosen), current, held_in_order)
     solved = neighbourhood.solve(5.0, seed)
     assert solved is not None  # the hint is complete and feasible
     found = neighbourhood.onto(current, solved)
     checks = check(problem, ctx.cliques, found)
     assert checks.acyclic[0] and checks.density[0]
     assert ctx.orientation.topological_rank(found.a_first[0]) is not None
+    if held_in_order:  # no held node comes to precede one ranked before it
+        held = np.flatnonzero(~np.isin(problem.node_robot, chosen))
+        closure = nx.transitive_closure_dag(_node_graph(problem, found.a_first[0]))
+        ranked = held[np.argsort(current.rank[held])].tolist()  # the incumbent's order
+        assert not any(closure.has_edge(v, u) for i, u in enumerate(ranked) for v in ranked[i:])
     both = Assignments(
         np.concatenate([found.a_first, start.a_first]),
         np.concatenate([found.following, start.following]),
