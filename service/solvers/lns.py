@@ -30,7 +30,10 @@ such a cycle needs no waiting, so time bounds alone do not exclude it (every
 sub-problem answer on a two-lane warehouse closed one without the following). The
 sub-problem orders the picked robots' nodes and the held nodes its conflicts
 touch (*boundary* nodes), with one precedence per pair of boundary nodes that
-the held graph connects (see ``_Neighbourhood._order``).
+the held graph connects (see ``_Neighbourhood._order``). Up to
+HELD_IN_ORDER_MAX_CONFLICTS conflicts the held nodes instead keep the incumbent's
+topological order, at constant positions (``_Neighbourhood._order_in_place``): a
+smaller model, and a restriction where the held graph leaves some unordered.
 
 A picked robot waits for a held robot's least times, and may pass one first as long
 as that delays it no further than its latest delays
