@@ -30,10 +30,11 @@ such a cycle needs no waiting, so time bounds alone do not exclude it (every
 sub-problem answer on a two-lane warehouse closed one without the following). The
 sub-problem orders the picked robots' nodes and the held nodes its conflicts
 touch (*boundary* nodes), with one precedence per pair of boundary nodes that
-the held graph connects (see ``_Neighbourhood._order``). Up to
-HELD_IN_ORDER_MAX_CONFLICTS conflicts the held nodes instead keep the incumbent's
-topological order, at constant positions (``_Neighbourhood._order_in_place``): a
-smaller model, and a restriction where the held graph leaves some unordered.
+the held graph connects (see ``_Neighbourhood._order``). Where the caller asks
+(``auto`` up to its ``exact_stage_max_conflicts``, see ``portfolio.LNS_HELD_IN_ORDER``)
+the held nodes instead keep the incumbent's topological order, at constant positions
+(``_Neighbourhood._order_in_place``): a smaller model, and a restriction where the held
+graph leaves some unordered.
 
 A picked robot waits for a held robot's least times, and may pass one first as long
 as that delays it no further than its latest delays
@@ -100,14 +101,7 @@ from service.solvers.pace import Pace
 from service.solvers.registry import SolveContext, SolverOutput, register
 from service.solvers.tabu import plain_start
 
-__all__ = [
-    "HELD_IN_ORDER_MAX_CONFLICTS",
-    "LNS_OBJECTIVES",
-    "LNS_ROBOTS",
-    "SUB_TIME_S",
-    "LnsResult",
-    "lns_search",
-]
+__all__ = ["LNS_OBJECTIVES", "LNS_ROBOTS", "SUB_TIME_S", "LnsResult", "lns_search"]
 
 # Objectives a neighbourhood's part of the cost stands for (sums over robots).
 LNS_OBJECTIVES = ("avg_completion", "avg_delay")
@@ -149,17 +143,6 @@ SUB_TUNING = {
     "transitive_precedences_work_limit": 0,
     "use_sat_inprocessing": False,
 }
-# Sub-problems keep the held robots in the incumbent's topological order up to this many
-# conflicts: each held node at a constant position, instead of a position variable for
-# each held node a freed conflict touches and the links the held graph makes between them
-# (``_Neighbourhood._order``). A restriction where the held graph leaves two of those
-# nodes unordered, but a smaller model. Measured (session 39; 40 neighbourhoods of 4 robots
-# on a two-way warehouse of 250 robots: build 30 -> 22 ms, CP-SAT 49 -> 28 ms, the same
-# optimum in 36, worse in 3, better in 1; ``auto`` at 5 s, two seeds, two worlds per kind,
-# docs/benchmarks.md "Fewer rows per LNS step"): 100-robot warehouses (2,000-3,900
-# conflicts, 8 robots a step) 0.9700 -> 0.9823, better or even in 8 of 8 runs; 250-robot
-# ones (11,000-23,000 conflicts, 4 robots) 0.9553 -> 0.9464 (two-lane and wh_mixed worse).
-HELD_IN_ORDER_MAX_CONFLICTS = 10_000
 # Least time left worth another step, beyond what building the last one took (~10-30 ms
 # at 100 robots, 30-50 ms at 250: without it 0.2-s requests there ran 0.24 s).
 MIN_STEP_S = 0.03
@@ -424,7 +407,7 @@ class _Neighbourhood:
         self, ctx: SolveContext, robots: np.ndarray, a_lit: np.ndarray, current: _Incumbent
     ) -> None:
         """Acyclicity with the held nodes kept in the incumbent's topological order (see
-        HELD_IN_ORDER_MAX_CONFLICTS): each held node at a constant position, its rank
+        ``portfolio.LNS_HELD_IN_ORDER``): each held node at a constant position, its rank
         times the picked nodes plus one (so that all of them fit between two), the picked
         nodes' positions increasing along their paths and along every freed conflict. A
         restriction: the held graph may leave two held nodes unordered that a picked
@@ -622,14 +605,13 @@ def lns_search(
     seed: int,
     converge: bool = False,
     robots: int = LNS_ROBOTS,
-    held_in_order: bool | None = None,
+    held_in_order: bool = False,
 ) -> LnsResult:
     """LNS from the valid ``start`` until ``deadline`` (monotonic), or with ``converge``
     until a plateau at the largest neighbourhood (min(MAX_ROBOTS, fleet)); at once when a
     step that freed every robot in a conflict (the whole problem: nothing held that
     could wait) is proven optimal. The first neighbourhoods free ``robots`` robots;
-    with ``held_in_order`` they keep the held robots in the incumbent's order (None: up
-    to HELD_IN_ORDER_MAX_CONFLICTS conflicts).
+    with ``held_in_order`` they keep the held robots in the incumbent's order.
 
     ``ctx.workers`` sub-problems are solved at once, each in a thread (CP-SAT releases
     the GIL): while one is solved the next is built, from robots that no running one
@@ -646,8 +628,6 @@ def lns_search(
     fleet = _Fleet.of(ctx)
     rng = np.random.default_rng(seed)
     n_robots = ctx.problem.n_robots
-    if held_in_order is None:
-        held_in_order = ctx.problem.n_conflicts <= HELD_IN_ORDER_MAX_CONFLICTS
     involved = np.flatnonzero(np.diff(fleet.robot_conflicts[0]))  # robots in a conflict
     best, current = start, _Incumbent.start(ctx, fleet, start)
     sizes, steps = _Sizes(n_robots, converge, robots), 0

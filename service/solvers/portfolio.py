@@ -122,6 +122,18 @@ EXACT_TIME_PER_BUILD = 4
 # session 26's rule. Per objective: (s per conflict per robot, least s) left.
 LARGE_LNS_RULE = {"avg_completion": (0.015, 3.0), "avg_delay": (0.03, 4.0)}
 LARGE_LNS_ROBOTS = 4
+# LNS's sub-problems keep the held robots in the incumbent's topological order up to
+# ``exact_stage_max_conflicts`` conflicts (where its neighbourhoods start at LNS_ROBOTS):
+# each held node at a constant position, instead of a position variable for each held
+# node a freed conflict touches and the links the held graph makes between them
+# (``lns._Neighbourhood._order``). A restriction where the held graph leaves two of those
+# nodes unordered, but a smaller model. Measured (session 39; 40 neighbourhoods of 4 robots
+# on a two-way warehouse of 250 robots: build 30 -> 22 ms, CP-SAT 49 -> 28 ms, the same
+# optimum in 36, worse in 3, better in 1; ``auto`` at 5 s, two seeds, two worlds per kind,
+# docs/benchmarks.md "Fewer rows per LNS step"): 100-robot warehouses (2,000-3,900
+# conflicts, 8 robots a step) 0.9700 -> 0.9823, better or even in 8 of 8 runs; 250-robot
+# ones (11,000-23,000 conflicts, 4 robots) 0.9553 -> 0.9464 (two-lane and wh_mixed worse).
+LNS_HELD_IN_ORDER = True  # up to exact_stage_max_conflicts; above, never (measured worse)
 # Share of the time after the first stage that LNS may take, below lns_min_conflicts,
 # before the CP-SAT stage (which proves optimality where it can): LNS stops sooner when
 # it converges (a plateau at its largest neighbourhood). Measured (session 19, 25
@@ -267,7 +279,11 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
             deadline if last else min(deadline - left * (1 - MID_LNS_SHARE), deadline - exact_min_s)
         )
         robots = LARGE_LNS_ROBOTS if too_large else LNS_ROBOTS
-        found = lns_search(ctx, best.assignment, until, ctx.seed, converge=not last, robots=robots)
+        in_order = LNS_HELD_IN_ORDER and not too_large
+        found = lns_search(
+            ctx, best.assignment, until, ctx.seed,
+            converge=not last, robots=robots, held_in_order=in_order,
+        )  # fmt: skip
         steps = found.steps
         if found.cost < cost or found.optimal:
             best, cost = replace(best, assignment=found.best), found.cost
