@@ -118,14 +118,7 @@ def test_the_held_graph_links_each_boundary_node_to_the_first_ones_it_reaches(
     starts = np.flatnonzero(boundary)
     walk = ctx.orientation.walk_args(a_first)
     tails, heads = lns._held_reach(starts, boundary, picked_node, rank, *walk)
-    held = nx.DiGraph()
-    held.add_nodes_from(np.flatnonzero(~picked_node).tolist())
-    along = problem.node_robot[1:] == problem.node_robot[:-1]
-    arcs = [(v, v + 1) for v in np.flatnonzero(along).tolist()]
-    tails_now = np.where(a_first, problem.conf_a, problem.conf_b)  # (M,) passing first
-    heads_now = np.where(a_first, problem.conf_b, problem.conf_a)
-    arcs += list(zip(tails_now.tolist(), heads_now.tolist(), strict=True))
-    held.add_edges_from((u, v) for u, v in arcs if not picked_node[u] and not picked_node[v])
+    held = _node_graph(problem, a_first).subgraph(np.flatnonzero(~picked_node).tolist())
     expected_tails, expected_heads = [], []
     for u in starts.tolist():
         inner = held.subgraph([v for v in held if not boundary[v]] + [u])
