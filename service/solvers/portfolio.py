@@ -275,7 +275,8 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
         turned = take_turns(ctx, best.assignment, cost, until, ctx.seed)
         if turned.cost < cost:
             best, cost = replace(best, assignment=turned.best), turned.cost
-            stages.append(f"re-insertion and priority x{turned.turns}")
+            searches = "re-insertion and priority" if turned.prioritized else "re-insertion"
+            stages.append(f"{searches} x{turned.turns}")
         if not uses_lns:
             cap = ctx.exact_stage_max_conflicts
             verdict = f"re-insertion and priority search to the deadline above {cap} conflicts"
