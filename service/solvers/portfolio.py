@@ -146,8 +146,9 @@ LNS_HELD_IN_ORDER = True  # up to exact_stage_max_conflicts; above, never (measu
 # 0.9597 -> 0.9984 at 1 s (proven 4 -> 3), 0.9669 -> 0.9975 at 5 s (proven 7 -> 5).
 # Session 40 (0.5 -> 0.8; ``auto`` through the dispatcher, generated wh_two_way and
 # wh_two_lane of 25 robots, floor_dense 25 and floor_sparse 50 (128-540 conflicts), three
-# worlds each, two seeds, against the best known): avg_completion 1 s 0.9852 -> 0.9903,
-# 5 s 0.9957 -> 0.9960, proven 8 / 14 of 22 either way; avg_delay 1 s 0.9574 -> 0.9644, 5 s
+# worlds each, two seeds, against the best known; at 1 s the two interleaved run by run):
+# avg_completion 1 s 0.9825 -> 0.9855 (8 of 22 runs better, 2 worse), 5 s 0.9957 -> 0.9960,
+# proven 8 / 14 of 22 either way; avg_delay 1 s 0.9751 -> 0.9886 (9 better, none worse), 5 s
 # 0.9895 -> 0.9862 (one run of 22 dearer, the rest equal: LNS converges first at 5 s);
 # conformance sets at 1 s 0.9999 -> 1.0000, geo_dense_25 proven at 1 s 30 % -> 55 %, at
 # 5 s 26 of the 28 MILP-proven runs proven as before. At 1 s the CP-SAT stage, with half
@@ -275,8 +276,7 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
         turned = take_turns(ctx, best.assignment, cost, until, ctx.seed)
         if turned.cost < cost:
             best, cost = replace(best, assignment=turned.best), turned.cost
-            searches = "re-insertion and priority" if turned.prioritized else "re-insertion"
-            stages.append(f"{searches} x{turned.turns}")
+            stages.append(f"re-insertion and priority x{turned.turns}")
         if not uses_lns:
             cap = ctx.exact_stage_max_conflicts
             verdict = f"re-insertion and priority search to the deadline above {cap} conflicts"

@@ -27,8 +27,6 @@ its moves paid there no more than the re-insertion steps they took the time of. 
 +0.003 / +0.011 at 5 s; kinds not tuned on (wh_mixed, wh_one_way of 250) +0.035 at 1 s,
 +0.021 at 5 s; wh_parked even at 1 s, +0.017 at 5 s. Without priority search at all:
 +0.015 at 1 s but -0.005 at 5 s (250 robots).
-Only in turns given at least PRIORITY_MIN_S in all: in shorter ones (1-s budgets) its
-part paid less than re-insertion's steps (session 40, on the slower Xeon).
 """
 
 from __future__ import annotations
@@ -42,7 +40,7 @@ from service.solvers.priority import answer_ranks, priority_search
 from service.solvers.registry import SolveContext
 from service.solvers.reinsert import reinsert_search
 
-__all__ = ["COOLED_SHARE", "PRIORITY_MIN_S", "TurnsConfig", "TurnsResult", "take_turns"]
+__all__ = ["COOLED_SHARE", "TurnsConfig", "TurnsResult", "take_turns"]
 
 
 # Share of the time given to the turns over which re-insertion's annealing cools (its
@@ -56,18 +54,6 @@ __all__ = ["COOLED_SHARE", "PRIORITY_MIN_S", "TurnsConfig", "TurnsResult", "take
 # 5 s 0.9341 / 0.9319; over 0.7 1 s 0.8472, 5 s 0.9278; over 0.3 1 s 0.8472, 5 s 0.9193.
 # On kinds not tuned on (wh_mixed, wh_one_way, wh_parked at 250 robots): even at both.
 COOLED_SHARE = 0.5
-# Priority search takes part only in turns given at least this long in all (re-insertion
-# alone otherwise). Measured (session 40, the slower Xeon; ``auto`` through the dispatcher,
-# priority search as shipped against none, mean cost ratio against the best known and
-# every run of the comparison; docs/benchmarks.md "Priority search only in longer turns"):
-# at 1 s (turns of 0.4-0.9 s) the generated warehouses of 250 robots 0.8171 -> 0.8615 and
-# of 100 robots 0.9163 -> 0.9258 (two seeds); kinds not tuned on at 250 robots 0.9071 ->
-# 0.9008 (wh_mixed, wh_one_way, wh_parked, one seed) and 0.9712 -> 0.9869 (wh_parked,
-# wh_mixed, other worlds, two seeds), at 100 robots 0.9700 -> 0.9667. At 2 s (turns of
-# ~1.8 s) even (0.8883 / 0.8877), at 3 s 0.8923 -> 0.9024 (250 robots); at 5 s (~1.9 s
-# of turns, then LNS) 250 robots 0.9202 -> 0.9256 (three seeds), kinds not tuned on
-# 0.9970 -> 0.9936: kept from this length on, where it was measured to pay before.
-PRIORITY_MIN_S = 1.5
 
 
 @dataclass(frozen=True)
@@ -86,17 +72,14 @@ class TurnsConfig:
     # Priority search takes turns from the start, not only once re-insertion is cold (see
     # the module: measured worse at 1 s).
     priority_while_hot: bool = False
-    # Priority search takes part only where the turns are given at least this long.
-    priority_min_s: float = PRIORITY_MIN_S
 
 
 class TurnsResult(NamedTuple):
-    """The best answer, its cost, the turns taken and how many had priority search."""
+    """The best answer, its cost and the turns taken."""
 
     best: Assignments
     cost: float
     turns: int
-    prioritized: int
 
 
 def take_turns(
@@ -108,18 +91,15 @@ def take_turns(
     config: TurnsConfig = TurnsConfig(),
 ) -> TurnsResult:
     """Re-insertion then priority search, in turns from the valid ``start`` (of ``cost``)
-    until ``deadline`` (monotonic); each turn's searches get the next seed. Priority
-    search takes part only where that is at least ``config.priority_min_s`` away."""
-    best, turns, share, prioritized = start, 0, config.priority_share, 0
+    until ``deadline`` (monotonic); each turn's searches get the next seed."""
+    best, turns, share = start, 0, config.priority_share
     now = time.monotonic()
     turn_s = min(config.turn_s, config.turn_share * (deadline - now))
     cooling = (now, now + config.cooling_share * (deadline - now))  # then it searches cold
-    with_priority = deadline - now >= config.priority_min_s
     while (began := time.monotonic()) < deadline:
         before, turn_seed, turns = cost, seed + turns, turns + 1
         # While re-insertion is hot, the turns are its own (see the module).
-        cold = config.priority_while_hot or began >= cooling[1]
-        split = share if with_priority and cold else 0.0
+        split = share if config.priority_while_hot or began >= cooling[1] else 0.0
         found = reinsert_search(
             ctx, best, min(deadline, began + (1 - split) * turn_s), turn_seed, cooling=cooling
         )
@@ -129,12 +109,11 @@ def take_turns(
         if left <= 0:
             continue
         ranks = answer_ranks(ctx, best)
-        prioritized += 1
         # Given less than PriorityConfig.refit_min_s (0.5 s) here, it refits no types.
         best, cost, _ = priority_search(ctx, left, turn_seed, start=(ranks, best, cost))
         gains = (before - between, between - cost)
         share = _next_share(config, share, gains, (middle - began, time.monotonic() - middle))
-    return TurnsResult(best, cost, turns, prioritized)
+    return TurnsResult(best, cost, turns)
 
 
 def _next_share(

@@ -128,7 +128,7 @@ def test_priority_search_waits_until_reinsertion_is_cold(
 ) -> None:
     """While re-insertion's annealing is hot, the turns are re-insertion's alone; once it
     is cold, priority search takes its part of each turn (and from the start where
-    ``priority_while_hot``), unless the turns are given less than ``priority_min_s``."""
+    ``priority_while_hot``)."""
     calls: list[float] = []
 
     def recorded(*args, **kwargs):
@@ -142,7 +142,7 @@ def test_priority_search_waits_until_reinsertion_is_cold(
     cost = float(ctx.evaluator.evaluate(start).costs["avg_completion"][0])
     reinsert_search(ctx, start, np.inf, 0, max_steps=2)  # compiled before the clock runs
     priority_search(ctx, 0.01, 0, start=(answer_ranks(ctx, start), start, cost))
-    config = TurnsConfig(turn_s=0.05, cooling_share=0.5, priority_min_s=0.5)
+    config = TurnsConfig(turn_s=0.05, cooling_share=0.5)
     begin = time.monotonic()
     found = take_turns(ctx, start, cost, begin + 0.6, 0, config)
     assert calls and min(calls) >= begin + 0.3  # cold from half of the time on
@@ -151,6 +151,3 @@ def test_priority_search_waits_until_reinsertion_is_cold(
     begin = time.monotonic()
     take_turns(ctx, start, cost, begin + 0.6, 0, replace(config, priority_while_hot=True))
     assert calls and min(calls) < begin + 0.1
-    calls.clear()  # turns given less than priority_min_s: re-insertion's alone
-    found = take_turns(ctx, start, cost, time.monotonic() + 0.45, 0, config)
-    assert not calls and found.turns >= 3 and found.prioritized == 0
