@@ -1,0 +1,197 @@
+"""Two variants of ``auto`` side by side, interleaved run by run.
+
+The 2-vCPU benchmark machines drift: measured in blocks a few minutes apart, a variant
+read 0.8171 -> 0.8615 on the 250-robot generated warehouses at 1 s, and 0.8197 -> 0.8237
+(better on 13 of 24 runs, worse on 11) with the two run back to back (session 40,
+docs/benchmarks.md "Priority search in short turns: a drift, not a gain"). Here every
+world and solver seed runs variant A and variant B back to back in one process, their
+order alternating, so that the drift falls on both.
+
+A variant is a list of module attributes to set, ``module.NAME=value`` (the value a
+Python literal), e.g. ``service.solvers.portfolio.MID_LNS_SHARE=0.8``; before each run,
+every attribute either variant sets is put back to its value at start, then the run's
+variant applied. Ratios are against the best known: the committed 30-s references where
+they hold the world (``bench.anytime.REFERENCES``), and every run of the comparison.
+
+``python -m bench.ab --a service.solvers.portfolio.MID_LNS_SHARE=0.8 --b
+service.solvers.portfolio.MID_LNS_SHARE=0.5 --worlds wh_two_way:25 --budget 1`` prints
+per family the mean cost ratio and delay ratio of each variant and how many runs A won
+and lost, and writes ``rows.json`` and ``tables.md`` under ``--out``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import importlib
+import json
+from collections import defaultdict
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+from tqdm import tqdm
+
+from bench import anytime
+from bench.cases import Case, measured, request_key, service_policy, world_cases
+from bench.report import MODEL_STORE, jsonable, machine_info, nanmean
+from service.memory import settle
+
+__all__ = ["Config", "Setting", "main", "parse_setting", "run", "table"]
+
+VARIANTS = ("A", "B")
+
+
+@dataclass(frozen=True)
+class Setting:
+    """One module attribute and the value a variant gives it."""
+
+    module: str
+    name: str
+    value: Any
+
+
+def parse_setting(text: str) -> Setting:
+    """``module.NAME=value`` -> Setting (value a Python literal).
+
+    Raises:
+        ValueError: not of that form, the value not a literal, or the module or its
+            attribute missing (a typo would otherwise compare a variant with itself).
+    """
+    target, sep, literal = text.partition("=")
+    module, dot, name = target.strip().rpartition(".")
+    if not sep or not dot or not module or not name:
+        raise ValueError(f"{text!r}: expected module.NAME=value")
+    try:
+        value = ast.literal_eval(literal.strip())
+    except (ValueError, SyntaxError) as e:
+        raise ValueError(f"{text!r}: the value is not a Python literal") from e
+    if not hasattr(importlib.import_module(module), name):
+        raise ValueError(f"{text!r}: {module} has no attribute {name}")
+    return Setting(module, name, value)
+
+
+@contextmanager
+def applied(settings: Sequence[Setting]) -> Iterator[None]:
+    """``settings`` set for the duration, each attribute's value restored after."""
+    saved = [(importlib.import_module(s.module), s.name) for s in settings]
+    before = [getattr(module, name) for module, name in saved]
+    try:
+        for (module, name), s in zip(saved, settings, strict=True):
+            setattr(module, name, s.value)
+        yield
+    finally:
+        for (module, name), value in zip(saved, before, strict=True):
+            setattr(module, name, value)
+
+
+@dataclass(frozen=True)
+class Config:
+    """What to compare and on what."""
+
+    a: tuple[str, ...] = ()  # variant A's settings, ``module.NAME=value``
+    b: tuple[str, ...] = ()  # variant B's
+    worlds: tuple[str, ...] = ("wh_two_way:100", "wh_two_lane:100")
+    per_world: int = 3
+    budget: float = 1.0
+    solver_seeds: int = 2
+    objective: str = "avg_completion"
+    base_seed: int = 0  # the worlds' first seed; solver seeds count from 0
+    store: Path = MODEL_STORE
+    cache: Path = Path("bench/cache")
+    references: Path | None = anytime.REFERENCES
+    out: Path = Path("bench/out/ab")
+
+
+def run(cfg: Config, progress: bool = True) -> dict[str, Any]:
+    """Both variants on every world and solver seed, back to back, order alternating."""
+    variants = {"A": [parse_setting(t) for t in cfg.a], "B": [parse_setting(t) for t in cfg.b]}
+    cases = world_cases(cfg.worlds, cfg.per_world, cfg.cache, cfg.base_seed, cfg.objective)
+    policy = service_policy(cfg.store)
+    runner = anytime.Config(methods=("auto",), objective=cfg.objective, base_seed=cfg.base_seed)
+    anytime.warm_up(runner, cases, policy)
+    settle()
+    refs = _references(cfg)
+    rows: list[dict[str, Any]] = []
+    jobs = [(case, seed) for seed in range(cfg.solver_seeds) for case in cases]
+    for k, (case, seed) in enumerate(tqdm(jobs, desc="ab", unit="pair", disable=not progress)):
+        pair = []
+        for tag in VARIANTS if k % 2 == 0 else VARIANTS[::-1]:
+            with applied(variants[tag]):
+                row = anytime.run_method("auto", case, cfg.budget, runner, policy, seed)
+            pair.append({**row, "variant": tag})
+        rows += measured(case, [*_known(refs, case, cfg), *pair])[-2:]
+    return {"machine": machine_info(), "config": jsonable(asdict(cfg)), "rows": rows}
+
+
+def _references(cfg: Config) -> dict[str, list[dict[str, Any]]]:
+    """The committed references by request key (none where ``cfg.references`` is None)."""
+    return {} if cfg.references is None else json.loads(cfg.references.read_text())
+
+
+def _known(refs: dict[str, list[dict[str, Any]]], case: Case, cfg: Config) -> list[dict[str, Any]]:
+    """The committed reference runs of ``case`` (none where the world is not among them)."""
+    return refs.get(request_key(case, cfg.objective, anytime.Config().reference_budget), [])
+
+
+def table(rows: Sequence[dict[str, Any]]) -> str:
+    """Markdown: per family (and all), runs, each variant's mean cost / delay ratio against
+    the best known at the end (every run of the comparison included), and the runs where
+    A cost less or more than B."""
+    best: dict[str, float] = {}
+    for r in rows:
+        best[r["name"]] = min(best.get(r["name"], r["ref_cost"]), r["ref_cost"], r["cost"])
+    ratios: dict[str, dict[str, list[tuple[float, float]]]] = defaultdict(lambda: defaultdict(list))
+    costs: dict[str, dict[tuple[str, int], dict[str, float]]] = defaultdict(
+        lambda: defaultdict(dict)
+    )
+    for r in rows:
+        ref, free = best[r["name"]], r["free"]
+        delay = (ref - free) / (r["cost"] - free) if r["cost"] > free else 1.0
+        for family in (r["family"], "all"):
+            ratios[family][r["variant"]].append((ref / r["cost"], delay))
+            costs[family][(r["name"], r["seed"])][r["variant"]] = r["cost"]
+    lines = ["| family | runs | A | B | A cheaper / dearer |", "|---|---|---|---|---|"]
+    for family, of in ratios.items():
+        cells = [
+            f"{nanmean([c for c, _ in of[v]]):.4f} / {nanmean([d for _, d in of[v]]):.3f}"
+            for v in VARIANTS
+        ]
+        pairs = [c for c in costs[family].values() if len(c) == 2]
+        wins, losses = sum(c["A"] < c["B"] for c in pairs), sum(c["A"] > c["B"] for c in pairs)
+        lines.append(f"| {family} | {len(of['A'])} | {cells[0]} | {cells[1]} | {wins} / {losses} |")
+    return "\n".join(lines)
+
+
+def _parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--a", nargs="*", default=[], help="variant A: module.NAME=value ...")
+    p.add_argument("--b", nargs="*", default=[], help="variant B: module.NAME=value ...")
+    p.add_argument("--worlds", nargs="+", help="generated worlds as kind:robots")
+    p.add_argument("--per-world", type=int, help="worlds of each kind and size")
+    p.add_argument("--budget", type=float, help="seconds per solve")
+    p.add_argument("--solver-seeds", type=int, help="solver seeds per world (0, 1, ...)")
+    p.add_argument("--objective")
+    p.add_argument("--seed", type=int, dest="base_seed", help="the worlds' first seed")
+    p.add_argument("--out", type=Path)
+    return p.parse_args(argv)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """CLI entry: run, print the table, write it and the rows under ``--out``."""
+    args = _parse_args(argv)
+    given = {k: tuple(v) if isinstance(v, list) else v for k, v in vars(args).items()}
+    cfg = Config(**{k: v for k, v in given.items() if v is not None})
+    results = run(cfg)
+    text = table(results["rows"])
+    cfg.out.mkdir(parents=True, exist_ok=True)
+    (cfg.out / "rows.json").write_text(json.dumps(results, indent=1))
+    (cfg.out / "tables.md").write_text(text + "\n")
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

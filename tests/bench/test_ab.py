@@ -1,0 +1,74 @@
+"""bench.ab: settings parsed and applied, variants interleaved, the table's counts."""
+
+from __future__ import annotations
+
+import pytest
+
+import bench.ab as ab
+from bench.ab import Config, Setting, applied, parse_setting, table
+from service.solvers import portfolio
+
+
+def test_a_setting_names_a_module_attribute_and_a_literal() -> None:
+    s = parse_setting("service.solvers.portfolio.MID_LNS_SHARE = 0.8")
+    assert s == Setting("service.solvers.portfolio", "MID_LNS_SHARE", 0.8)
+    assert parse_setting("service.solvers.portfolio.PLANNED_ORDERS=(1, 2)").value == (1, 2)
+    for bad in ("MID_LNS_SHARE=0.8", "service.solvers.portfolio.MID_LNS_SHARE",
+                "service.solvers.portfolio.MID_LNS_SHARE=share",
+                "service.solvers.portfolio.NO_SUCH_NAME=1"):  # fmt: skip
+        with pytest.raises(ValueError, match="expected|literal|no attribute"):
+            parse_setting(bad)
+
+
+def test_settings_hold_for_the_run_and_are_restored_even_on_error() -> None:
+    before = portfolio.MID_LNS_SHARE
+    with applied([parse_setting("service.solvers.portfolio.MID_LNS_SHARE=0.123")]):
+        assert portfolio.MID_LNS_SHARE == 0.123
+    assert before == portfolio.MID_LNS_SHARE
+    with pytest.raises(RuntimeError), applied([Setting(portfolio.__name__, "MID_LNS_SHARE", 7)]):
+        raise RuntimeError
+    assert before == portfolio.MID_LNS_SHARE
+
+
+def _row(name: str, seed: int, variant: str, cost: float, ref: float = 10.0) -> dict:
+    return {"name": name, "family": name.split("/")[0], "seed": seed, "variant": variant,
+            "cost": cost, "free": 5.0, "ref_cost": ref}  # fmt: skip
+
+
+def test_the_table_counts_wins_and_measures_against_the_best_at_the_end() -> None:
+    rows = [_row("w/0", 0, "A", 10.0), _row("w/0", 0, "B", 20.0, ref=20.0),
+            _row("w/1", 0, "A", 30.0, ref=12.0), _row("w/1", 0, "B", 24.0, ref=12.0)]  # fmt: skip
+    lines = table(rows).splitlines()
+    (w,) = [line for line in lines if line.startswith("| w |")]
+    # w/0: best 10 (A's run): A 1.0, B 0.5; delay (10 - 5) / (cost - 5): 1.0, 0.333. w/1:
+    # best 12: A 0.4, B 0.5; delay 0.28, 0.368.
+    assert w == "| w | 2 | 0.7000 / 0.640 | 0.5000 / 0.351 | 1 / 1 |"
+    assert any(line.startswith("| all | 2 |") for line in lines)
+
+
+def test_variants_run_back_to_back_their_order_alternating(monkeypatch, tmp_path) -> None:
+    seen: list[tuple[str, float]] = []
+
+    def fake(method, case, budget, cfg, policy, seed=None):
+        seen.append((case.name, portfolio.MID_LNS_SHARE))
+        return {"name": case.name, "family": case.family, "seed": seed, "cost": 10.0,
+                "optimal": False, "free": 1.0}  # fmt: skip
+
+    class FakeCase:
+        def __init__(self, name: str) -> None:
+            self.name, self.family, self.ref_cost, self.free = name, "f", None, 1.0
+
+    cases = [FakeCase("w/0"), FakeCase("w/1")]
+    monkeypatch.setattr(ab, "world_cases", lambda *a, **k: cases)
+    monkeypatch.setattr(ab, "service_policy", lambda store: None)
+    monkeypatch.setattr(ab.anytime, "warm_up", lambda *a: None)
+    monkeypatch.setattr(ab.anytime, "run_method", fake)
+    monkeypatch.setattr(ab, "request_key", lambda *a: "key")
+    a, b = (
+        "service.solvers.portfolio.MID_LNS_SHARE=0.1",
+        "service.solvers.portfolio.MID_LNS_SHARE=0.2",
+    )
+    results = ab.run(Config(a=(a,), b=(b,), solver_seeds=2, references=None), progress=False)
+    assert seen == [("w/0", 0.1), ("w/0", 0.2), ("w/1", 0.2), ("w/1", 0.1)] * 2
+    assert [r["variant"] for r in results["rows"]] == ["A", "B", "B", "A"] * 2
+    assert portfolio.MID_LNS_SHARE not in (0.1, 0.2)
