@@ -1,4 +1,4 @@
-"""bench.ab: settings parsed and applied, variants interleaved, the table's counts."""
+"""bench.ab: settings parsed and applied, variants warmed and interleaved, the table's counts."""
 
 from __future__ import annotations
 
@@ -61,7 +61,8 @@ def test_variants_run_back_to_back_their_order_alternating(monkeypatch, tmp_path
     cases = [FakeCase("w/0"), FakeCase("w/1")]
     monkeypatch.setattr(ab, "world_cases", lambda *a, **k: cases)
     monkeypatch.setattr(ab, "service_policy", lambda store: None)
-    monkeypatch.setattr(ab.anytime, "warm_up", lambda *a: None)
+    warmed: list[float] = []
+    monkeypatch.setattr(ab.anytime, "warm_up", lambda *a: warmed.append(portfolio.MID_LNS_SHARE))
     monkeypatch.setattr(ab.anytime, "run_method", fake)
     monkeypatch.setattr(ab, "request_key", lambda *a: "key")
     a, b = (
@@ -69,6 +70,7 @@ def test_variants_run_back_to_back_their_order_alternating(monkeypatch, tmp_path
         "service.solvers.portfolio.MID_LNS_SHARE=0.2",
     )
     results = ab.run(Config(a=(a,), b=(b,), solver_seeds=2, references=None), progress=False)
+    assert warmed == [0.1, 0.2]  # each variant warmed up with its settings
     assert seen == [("w/0", 0.1), ("w/0", 0.2), ("w/1", 0.2), ("w/1", 0.1)] * 2
     assert [r["variant"] for r in results["rows"]] == ["A", "B", "B", "A"] * 2
     assert portfolio.MID_LNS_SHARE not in (0.1, 0.2)
