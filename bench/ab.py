@@ -36,7 +36,7 @@ from tqdm import tqdm
 
 from bench import anytime
 from bench.cases import Case, measured, request_key, service_policy, world_cases
-from bench.report import MODEL_STORE, jsonable, machine_info, nanmean
+from bench.report import MODEL_STORE, delay_ratio, jsonable, machine_info, nanmean
 from service.memory import settle
 
 __all__ = ["Config", "Setting", "main", "parse_setting", "run", "table"]
@@ -150,10 +150,11 @@ def table(rows: Sequence[dict[str, Any]]) -> str:
         lambda: defaultdict(dict)
     )
     for r in rows:
-        ref, free = best[r["name"]], r["free"]
-        delay = (ref - free) / (r["cost"] - free) if r["cost"] > free else 1.0
+        ref = best[r["name"]]
         for family in (r["family"], "all"):
-            ratios[family][r["variant"]].append((ref / r["cost"], delay))
+            ratios[family][r["variant"]].append(
+                (ref / r["cost"], delay_ratio(ref, r["cost"], r["free"]))
+            )
             costs[family][(r["name"], r["seed"])][r["variant"]] = r["cost"]
     lines = ["| family | runs | A | B | A cheaper / dearer |", "|---|---|---|---|---|"]
     for family, of in ratios.items():
