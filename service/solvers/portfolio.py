@@ -23,7 +23,8 @@ comes first, improving in stages:
    a few robots at a time from the best answer so far (:mod:`service.solvers.lns`).
    From ``lns_min_conflicts`` conflicts until the deadline, instead of the next
    stage: on whole models of this size one CP-SAT worker barely moves from its
-   hint. Above ``exact_stage_max_conflicts`` too, from smaller neighbourhoods, where
+   hint; there only where MID_LNS_LEAST_S are left (with less, the turns take the
+   time). Above ``exact_stage_max_conflicts`` too, from smaller neighbourhoods, where
    the budget leaves it time in proportion to the conflicts per robot (see
    LARGE_LNS_RULE). Below ``lns_min_conflicts``, until it converges (a
    plateau at its largest neighbourhood), proves optimality (a step that freed every
@@ -173,6 +174,20 @@ MID_LNS_SHARE = 0.8
 # warehouses, two seeds, 1 s / 5 s: two-way 0.766 -> 0.832 / 0.874 -> 0.908, two-lane
 # 0.850 -> 0.866 / 0.935 -> 0.921), the share left as it was.
 REINSERT_SHARE = 0.43
+# From ``lns_min_conflicts`` up to ``exact_stage_max_conflicts`` conflicts, LNS follows the
+# re-insertion turns only where the time left before the plans is at least this many
+# seconds; with less the turns run to the deadline. Measured (session 41, ``python -m
+# bench.ab``: ``auto`` through the dispatcher, the two variants interleaved run by run,
+# three worlds a kind, two seeds, mean cost ratio against the r5 references; turns to the
+# deadline / LNS after REINSERT_SHARE): wh_two_way and wh_two_lane of 100 robots
+# (2,000-3,900 conflicts) 1 s 0.9282 / 0.9154 (REINSERT_SHARE 1.0 against 0.7; 0.7 against
+# 0.43 0.9251 / 0.8959), 2 s 0.9442 / 0.9352 (5 better, 7 worse), 3 s 0.9399 / 0.9516
+# (two-way worse in 6 of 6, two-lane better in 5 of 6), 5 s 0.9545 / 0.9736 (two-way worse
+# in 6 of 6); kinds not tuned on (wh_one_way, wh_mixed, wh_parked of 100) at 1 s 0.9776 /
+# 0.9617 (11 better, 7 worse); avg_delay at 1 s 0.9499 / 0.8494 (11 / 1), at 5 s 0.9716 /
+# 0.9494 (two-lane 0.999 / 0.919, two-way 0.944 / 0.980). LNS pays on the two-way
+# warehouses from ~3 s; from 2 s it keeps them.
+MID_LNS_LEAST_S = 2.0
 # From ``lns_min_conflicts`` conflicts the first stage is the cheapest of PLANNED_ORDERS
 # prioritized plans of the whole fleet (:func:`~service.solvers.reinsert.planned_start`,
 # ~1-2 ms a plan at 100 robots, 8-18 ms at 250), not priority search from the blend with
@@ -239,6 +254,11 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
         ctx.objective in LNS_OBJECTIVES
         and ctx.exact_max_conflicts < problem.n_conflicts
         and (not too_large or _lns_pays_above_cap(ctx, deadline))
+        and (  # from lns_min_conflicts to the cap, with MID_LNS_LEAST_S left at least
+            problem.n_conflicts < ctx.lns_min_conflicts
+            or too_large
+            or deadline - time.monotonic() >= MID_LNS_LEAST_S
+        )
     )
     lns_only = uses_lns and problem.n_conflicts >= ctx.lns_min_conflicts
     # The least time worth a CP-SAT stage (inf: none at this size).
@@ -278,8 +298,13 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
             best, cost = replace(best, assignment=turned.best), turned.cost
             stages.append(f"re-insertion and priority x{turned.turns}")
         if not uses_lns:
-            cap = ctx.exact_stage_max_conflicts
-            verdict = f"re-insertion and priority search to the deadline above {cap} conflicts"
+            verdict = (
+                f"re-insertion and priority search to the deadline above "
+                f"{ctx.exact_stage_max_conflicts} conflicts"
+                if too_large
+                else f"re-insertion and priority search to the deadline (LNS from "
+                f"{MID_LNS_LEAST_S:g} s)"
+            )
             return replace(best, optimal=False, detail=_detail(stages, verdict))
     if uses_lns:
         left = deadline - time.monotonic()
