@@ -8,10 +8,14 @@ world and solver seed runs variant A and variant B back to back in one process, 
 order alternating, so that the drift falls on both.
 
 A variant is a list of module attributes to set, ``module.NAME=value`` (the value a
-Python literal), e.g. ``service.solvers.portfolio.MID_LNS_SHARE=0.8``; before each run,
-every attribute either variant sets is put back to its value at start, then the run's
-variant applied. Ratios are against the best known: the committed 30-s references where
-they hold the world (``bench.anytime.REFERENCES``), and every run of the comparison.
+Python literal), e.g. ``service.solvers.portfolio.MID_LNS_SHARE=0.8``, or fields of a
+module's dataclass, ``module.Class.field=value`` (e.g.
+``service.solvers.turns.TurnsConfig.turn_s=0.25``: the module's name then makes instances
+with that default, which reaches code that builds its configuration at call time, as
+``take_turns`` and ``reinsert_search`` do by default); before each run, every attribute
+either variant sets is put back to its value at start, then the run's variant applied.
+Ratios are against the best known: the committed 30-s references where they hold the
+world (``bench.anytime.REFERENCES``), and every run of the comparison.
 
 ``python -m bench.ab --a service.solvers.portfolio.MID_LNS_SHARE=0.8 --b
 service.solvers.portfolio.MID_LNS_SHARE=0.5 --worlds wh_two_way:25 --budget 1`` prints
@@ -28,7 +32,8 @@ import json
 from collections import defaultdict
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields, is_dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -46,19 +51,22 @@ VARIANTS = ("A", "B")
 
 @dataclass(frozen=True)
 class Setting:
-    """One module attribute and the value a variant gives it."""
+    """One module attribute, or one field of a module's dataclass, and the value a variant
+    gives it."""
 
     module: str
-    name: str
+    name: str  # NAME, or Class.field
     value: Any
 
 
 def parse_setting(text: str) -> Setting:
-    """``module.NAME=value`` -> Setting (value a Python literal).
+    """``module.NAME=value`` or ``module.Class.field=value`` -> Setting (value a Python
+    literal).
 
     Raises:
-        ValueError: not of that form, the value not a literal, or the module or its
-            attribute missing (a typo would otherwise compare a variant with itself).
+        ValueError: not of that form, the value not a literal, or the module, its
+            attribute or the dataclass field missing (a typo would otherwise compare a
+            variant with itself).
     """
     target, sep, literal = text.partition("=")
     module, dot, name = target.strip().rpartition(".")
@@ -68,23 +76,40 @@ def parse_setting(text: str) -> Setting:
         value = ast.literal_eval(literal.strip())
     except (ValueError, SyntaxError) as e:
         raise ValueError(f"{text!r}: the value is not a Python literal") from e
-    if not hasattr(importlib.import_module(module), name):
+    try:
+        found = importlib.import_module(module)
+    except ModuleNotFoundError:  # module.Class.field
+        module, _, owner = module.rpartition(".")
+        found = getattr(importlib.import_module(module), owner, None)
+        if not is_dataclass(found) or name not in {f.name for f in fields(found)}:
+            raise ValueError(f"{text!r}: {module}.{owner} is no dataclass with {name}") from None
+        return Setting(module, f"{owner}.{name}", value)
+    if not hasattr(found, name):
         raise ValueError(f"{text!r}: {module} has no attribute {name}")
     return Setting(module, name, value)
 
 
 @contextmanager
 def applied(settings: Sequence[Setting]) -> Iterator[None]:
-    """``settings`` set for the duration, each attribute's value restored after."""
-    saved = [(importlib.import_module(s.module), s.name) for s in settings]
-    before = [getattr(module, name) for module, name in saved]
+    """``settings`` set for the duration, each attribute restored after; the fields of a
+    dataclass by putting in its place a factory of instances with those defaults."""
+    values: dict[tuple[str, str], Any] = {}
+    overrides: dict[tuple[str, str], dict[str, Any]] = defaultdict(dict)
+    for s in settings:
+        owner, _, field = s.name.partition(".")
+        if field:
+            overrides[(s.module, owner)][field] = s.value
+        else:
+            values[(s.module, owner)] = s.value
+    saved = {key: getattr(importlib.import_module(key[0]), key[1]) for key in {*values, *overrides}}
+    values |= {key: partial(saved[key], **given) for key, given in overrides.items()}
     try:
-        for (module, name), s in zip(saved, settings, strict=True):
-            setattr(module, name, s.value)
+        for (module, name), value in values.items():
+            setattr(importlib.import_module(module), name, value)
         yield
     finally:
-        for (module, name), value in zip(saved, before, strict=True):
-            setattr(module, name, value)
+        for (module, name), value in saved.items():
+            setattr(importlib.import_module(module), name, value)
 
 
 @dataclass(frozen=True)
@@ -170,7 +195,12 @@ def table(rows: Sequence[dict[str, Any]]) -> str:
 
 def _parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--a", nargs="*", default=[], help="variant A: module.NAME=value ...")
+    p.add_argument(
+        "--a",
+        nargs="*",
+        default=[],
+        help="variant A: module.NAME=value or module.Class.field=value ...",
+    )
     p.add_argument("--b", nargs="*", default=[], help="variant B: module.NAME=value ...")
     p.add_argument("--worlds", nargs="+", help="generated worlds as kind:robots")
     p.add_argument("--per-world", type=int, help="worlds of each kind and size")

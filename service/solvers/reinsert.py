@@ -818,7 +818,7 @@ def reinsert_search(
     start: Assignments,
     deadline: float,
     seed: int,
-    config: ReinsertConfig = ReinsertConfig(),
+    config: ReinsertConfig | None = None,
     max_steps: int | None = None,
     cooling: tuple[float, float] | None = None,
 ) -> ReinsertResult:
@@ -829,7 +829,9 @@ def reinsert_search(
 
     ``cooling``: the (monotonic) span over which an annealed search cools, for searches
     that take turns with another within it (default: from now to ``deadline``; with
-    ``max_steps``, by steps)."""
+    ``max_steps``, by steps). ``config`` None: ReinsertConfig's defaults, read at the
+    call (so that ``bench.ab`` can vary them)."""
+    config = ReinsertConfig() if config is None else config
     st = _Static.of(ctx)
     weight = ctx.evaluator.objective_weights(ctx.objective)
     budget = ctx.cliques.budget.astype(np.int64)

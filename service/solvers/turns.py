@@ -88,10 +88,12 @@ def take_turns(
     cost: float,
     deadline: float,
     seed: int,
-    config: TurnsConfig = TurnsConfig(),
+    config: TurnsConfig | None = None,
 ) -> TurnsResult:
     """Re-insertion then priority search, in turns from the valid ``start`` (of ``cost``)
-    until ``deadline`` (monotonic); each turn's searches get the next seed."""
+    until ``deadline`` (monotonic); each turn's searches get the next seed. ``config``
+    None: TurnsConfig's defaults, read at the call (so that ``bench.ab`` can vary them)."""
+    config = TurnsConfig() if config is None else config
     best, turns, share = start, 0, config.priority_share
     now = time.monotonic()
     turn_s = min(config.turn_s, config.turn_share * (deadline - now))

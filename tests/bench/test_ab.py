@@ -6,7 +6,8 @@ import pytest
 
 import bench.ab as ab
 from bench.ab import Config, Setting, applied, parse_setting, table
-from service.solvers import portfolio
+from service.solvers import portfolio, turns
+from service.solvers.turns import TurnsConfig
 
 
 def test_a_setting_names_a_module_attribute_and_a_literal() -> None:
@@ -28,6 +29,25 @@ def test_settings_hold_for_the_run_and_are_restored_even_on_error() -> None:
     with pytest.raises(RuntimeError), applied([Setting(portfolio.__name__, "MID_LNS_SHARE", 7)]):
         raise RuntimeError
     assert before == portfolio.MID_LNS_SHARE
+
+
+def test_a_dataclass_field_is_a_default_of_the_instances_made_while_it_holds() -> None:
+    s = parse_setting("service.solvers.turns.TurnsConfig.turn_s=0.25")
+    assert s == Setting("service.solvers.turns", "TurnsConfig.turn_s", 0.25)
+    for bad in ("service.solvers.turns.TurnsConfig.no_such_field=1",
+                "service.solvers.turns.take_turns.turn_s=1"):  # fmt: skip
+        with pytest.raises(ValueError, match="no dataclass"):
+            parse_setting(bad)
+    before = (TurnsConfig().turn_s, turns.COOLED_SHARE)
+    settings = [s, parse_setting("service.solvers.turns.TurnsConfig.least_share=0.2"),
+                parse_setting("service.solvers.turns.COOLED_SHARE=0.9")]  # fmt: skip
+    with applied(settings):
+        made = turns.TurnsConfig()
+        assert (made.turn_s, made.least_share) == (0.25, 0.2)
+        assert turns.TurnsConfig(turn_s=1.0).turn_s == 1.0  # an explicit value still wins
+        assert turns.COOLED_SHARE == 0.9
+    assert turns.TurnsConfig is TurnsConfig
+    assert (turns.TurnsConfig().turn_s, turns.COOLED_SHARE) == before
 
 
 def _row(name: str, seed: int, variant: str, cost: float, ref: float = 10.0) -> dict:
