@@ -403,7 +403,8 @@ def test_auto_runs_lns_instead_of_cp_sat_from_its_threshold(
 ) -> None:
     """From lns_min_conflicts LNS runs to the deadline instead of CP-SAT, with one worker
     or two (two sub-problems at once): the answer is checked, on time, never below the
-    proven optimum."""
+    proven optimum. (With 1 s, less than MID_LNS_LEAST_S, the turns would take the budget
+    whole: lowered here.)"""
     import service.solvers.portfolio as portfolio
 
     def no_cp_sat(*args: object, **kwargs: object) -> object:
@@ -417,6 +418,7 @@ def test_auto_runs_lns_instead_of_cp_sat_from_its_threshold(
 
     monkeypatch.setattr(portfolio, "improve", no_cp_sat)
     monkeypatch.setattr(portfolio, "lns_search", counted)
+    monkeypatch.setattr(portfolio, "MID_LNS_LEAST_S", 0.0)
     line = _conformance("wh_50")
     body = {
         **line["request"],
