@@ -136,7 +136,7 @@ PUSH = 2.0
 # 0.8993 / 0.9028 against 0.8867 / 0.8879, but 5 s 0.9444 against 0.9589 (four seeds).
 HOT_ORDERS = 1
 # Robots re-inserted per step at first, as a share of the fleet (ReinsertConfig.robots at
-# least, so fleets below 136 robots keep 8): a step's evaluation walks the whole fleet,
+# least, so fleets below 104 robots keep ROBOTS): a step's evaluation walks the whole fleet,
 # its repair only the picked robots, so bigger fleets afford more robots a step. Measured
 # (session 33; ``auto`` through the dispatcher on the generated warehouses, mean cost
 # ratio on one yardstick per comparison, each beside a control in the same hour): 16
@@ -146,6 +146,15 @@ HOT_ORDERS = 1
 # 0.7893 at 1 s. At 100 robots 16 read 0.808 against 0.825 (two-way, 1 s) and 4 robots
 # 0.783: 8 stays there.
 FLEET_SHARE = 1 / 16
+# Robots re-inserted per step at first, at least. Measured (session 41, ``python -m
+# bench.ab``: ``auto`` through the dispatcher, variants interleaved run by run, mean cost
+# ratio against the r5 references, runs where 6 cost less / more than 8), 6 against 8:
+# wh_two_way and wh_two_lane 100 (since MID_LNS_LEAST_S the turns take a 1-s budget whole
+# there) 1 s, four seeds, 0.9402 / 0.9317 (16 / 8; 12 against 8: 0.9239 / 0.9342, 8 / 16),
+# 5 s, two seeds, 0.9705 / 0.9679 (7 / 5), avg_delay 1 s 0.9359 / 0.9148 (9 / 3); kinds not
+# tuned on (wh_one_way, wh_mixed, wh_parked 100) 1 s 0.9737 / 0.9707 (9 / 9). Fleets of
+# 104 robots and more take FLEET_SHARE.
+ROBOTS = 6
 
 
 # Repairs of an order tried again where a robot had no passage, each with that robot put
@@ -166,7 +175,7 @@ REACH_MAX_NODES = 4000
 class ReinsertConfig:
     """Robots per step, orders tried per step, and how neighbourhoods grow."""
 
-    robots: int = 8  # robots re-inserted per step, at first, at least
+    robots: int = ROBOTS  # robots re-inserted per step, at first, at least
     # ... and at first this share of the fleet where that is more (see FLEET_SHARE)
     fleet_share: float = FLEET_SHARE
     # Random orders tried per step, the best evaluated. Measured (session 34, `auto` at 1 s

@@ -551,7 +551,8 @@ def test_distinct_ranks_are_unique_then_searchsorted(values: list[float]) -> Non
 
 
 @pytest.mark.parametrize(
-    ("robots", "share", "first"), [(30, 1 / 16, 8), (30, 0.5, 15), (40, 2.0, 32), (12, 2.0, 12)]
+    ("robots", "share", "first"),
+    [(30, 1 / 16, reinsert.ROBOTS), (30, 0.5, 15), (40, 2.0, 32), (12, 2.0, 12)],
 )
 def test_the_first_neighbourhoods_follow_the_fleet(
     robots: int, share: float, first: int, monkeypatch: pytest.MonkeyPatch
