@@ -144,7 +144,7 @@ HOT_ORDERS = 1
 # 100-robot worlds in the run, 0.790 / 0.793 -> 0.802 (two-way), 0.804 -> 0.809
 # (two-lane); 5 s (two seeds, twice) 0.9147 -> 0.9378 and 0.9169 -> 0.9288; 24 robots
 # 0.7893 at 1 s. At 100 robots 16 read 0.808 against 0.825 (two-way, 1 s) and 4 robots
-# 0.783: 8 stays there.
+# 0.783: 8 stayed there then (since session 41 6, see ROBOTS).
 FLEET_SHARE = 1 / 16
 # Robots re-inserted per step at first, at least. Measured (session 41, ``python -m
 # bench.ab``: ``auto`` through the dispatcher, variants interleaved run by run, mean cost
