@@ -298,13 +298,12 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
             best, cost = replace(best, assignment=turned.best), turned.cost
             stages.append(f"re-insertion and priority x{turned.turns}")
         if not uses_lns:
-            verdict = (
-                f"re-insertion and priority search to the deadline above "
-                f"{ctx.exact_stage_max_conflicts} conflicts"
+            why = (
+                f"above {ctx.exact_stage_max_conflicts} conflicts"
                 if too_large
-                else f"re-insertion and priority search to the deadline (LNS from "
-                f"{MID_LNS_LEAST_S:g} s)"
+                else f"(LNS from {MID_LNS_LEAST_S:g} s)"
             )
+            verdict = f"re-insertion and priority search to the deadline {why}"
             return replace(best, optimal=False, detail=_detail(stages, verdict))
     if uses_lns:
         left = deadline - time.monotonic()
