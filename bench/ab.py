@@ -116,9 +116,8 @@ def applied(settings: Sequence[Setting]) -> Iterator[None]:
 class Config:
     """What to compare and on what."""
 
-    a: tuple[
-        str, ...
-    ] = ()  # variant A's settings, ``module.NAME=value`` or ``module.Class.field=value``
+    # Variant A's settings, ``module.NAME=value`` or ``module.Class.field=value``.
+    a: tuple[str, ...] = ()
     b: tuple[str, ...] = ()  # variant B's
     worlds: tuple[str, ...] = ("wh_two_way:100", "wh_two_lane:100")
     per_world: int = 3
