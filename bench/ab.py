@@ -19,8 +19,10 @@ world (``bench.anytime.REFERENCES``), and every run of the comparison.
 
 ``python -m bench.ab --a service.solvers.portfolio.MID_LNS_SHARE=0.8 --b
 service.solvers.portfolio.MID_LNS_SHARE=0.5 --worlds wh_two_way:25 --budget 1`` prints
-per family the mean cost ratio and delay ratio of each variant and how many runs A won
-and lost, and writes ``rows.json`` and ``tables.md`` under ``--out``.
+per family the mean cost ratio and delay ratio of each variant, how many runs A won
+and lost and how many each proved optimal, and writes ``rows.json`` and ``tables.md``
+under ``--out``. ``--sets wh_25 geo_dense_25`` adds conformance sets, measured against
+their proven optima (``--worlds`` with no kind: the sets alone).
 """
 
 from __future__ import annotations
@@ -40,7 +42,14 @@ from typing import Any
 from tqdm import tqdm
 
 from bench import anytime
-from bench.cases import Case, measured, request_key, service_policy, world_cases
+from bench.cases import (
+    Case,
+    conformance_cases,
+    measured,
+    request_key,
+    service_policy,
+    world_cases,
+)
 from bench.report import MODEL_STORE, delay_ratio, jsonable, machine_info, nanmean
 from service.memory import settle
 
@@ -120,6 +129,8 @@ class Config:
     a: tuple[str, ...] = ()
     b: tuple[str, ...] = ()  # variant B's
     worlds: tuple[str, ...] = ("wh_two_way:100", "wh_two_lane:100")
+    # Conformance sets (``bench.cases.LARGE_SETS``, ...): ratios against their proven optima.
+    sets: tuple[str, ...] = ()
     per_world: int = 3
     budget: float = 1.0
     solver_seeds: int = 2
@@ -134,7 +145,9 @@ class Config:
 def run(cfg: Config, progress: bool = True) -> dict[str, Any]:
     """Both variants on every world and solver seed, back to back, order alternating."""
     variants = {"A": [parse_setting(t) for t in cfg.a], "B": [parse_setting(t) for t in cfg.b]}
-    cases = world_cases(cfg.worlds, cfg.per_world, cfg.cache, cfg.base_seed, cfg.objective)
+    cases = conformance_cases(cfg.sets, objective=cfg.objective) + world_cases(
+        cfg.worlds, cfg.per_world, cfg.cache, cfg.base_seed, cfg.objective
+    )
     policy = service_policy(cfg.store)
     runner = anytime.Config(methods=("auto",), objective=cfg.objective, base_seed=cfg.base_seed)
     for tag in VARIANTS:  # what a variant compiles is not timed either
@@ -166,8 +179,9 @@ def _known(refs: dict[str, list[dict[str, Any]]], case: Case, cfg: Config) -> li
 
 def table(rows: Sequence[dict[str, Any]]) -> str:
     """Markdown: per family (and all), runs, each variant's mean cost / delay ratio against
-    the best known at the end (every run of the comparison included), and the runs where
-    A cost less or more than B."""
+    the best known at the end (every run of the comparison included; a conformance
+    problem's proven optimum), the runs where A cost less or more than B, and each
+    variant's runs proven optimal."""
     best: dict[str, float] = {}
     for r in rows:
         best[r["name"]] = min(best.get(r["name"], r["ref_cost"]), r["ref_cost"], r["cost"])
@@ -182,7 +196,14 @@ def table(rows: Sequence[dict[str, Any]]) -> str:
                 (ref / r["cost"], delay_ratio(ref, r["cost"], r["free"]))
             )
             costs[family][(r["name"], r["seed"])][r["variant"]] = r["cost"]
-    lines = ["| family | runs | A | B | A cheaper / dearer |", "|---|---|---|---|---|"]
+    proven: dict[str, dict[str, int]] = defaultdict(lambda: defaultdict(int))
+    for r in rows:
+        for family in (r["family"], "all"):
+            proven[family][r["variant"]] += bool(r.get("optimal"))
+    lines = [
+        "| family | runs | A | B | A cheaper / dearer | proven A / B |",
+        "|---|---|---|---|---|---|",
+    ]
     for family, of in ratios.items():
         cells = [
             f"{nanmean([c for c, _ in of[v]]):.4f} / {nanmean([d for _, d in of[v]]):.3f}"
@@ -190,7 +211,10 @@ def table(rows: Sequence[dict[str, Any]]) -> str:
         ]
         pairs = [c for c in costs[family].values() if len(c) == 2]
         wins, losses = sum(c["A"] < c["B"] for c in pairs), sum(c["A"] > c["B"] for c in pairs)
-        lines.append(f"| {family} | {len(of['A'])} | {cells[0]} | {cells[1]} | {wins} / {losses} |")
+        found = f"{proven[family]['A']} / {proven[family]['B']}"
+        lines.append(
+            f"| {family} | {len(of['A'])} | {cells[0]} | {cells[1]} | {wins} / {losses} | {found} |"
+        )
     return "\n".join(lines)
 
 
@@ -203,7 +227,8 @@ def _parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
         help="variant A: module.NAME=value or module.Class.field=value ...",
     )
     p.add_argument("--b", nargs="*", default=[], help="variant B: module.NAME=value ...")
-    p.add_argument("--worlds", nargs="+", help="generated worlds as kind:robots")
+    p.add_argument("--worlds", nargs="*", help="generated worlds as kind:robots")
+    p.add_argument("--sets", nargs="*", help="conformance sets (proven optima)")
     p.add_argument("--per-world", type=int, help="worlds of each kind and size")
     p.add_argument("--budget", type=float, help="seconds per solve")
     p.add_argument("--solver-seeds", type=int, help="solver seeds per world (0, 1, ...)")

@@ -50,19 +50,21 @@ def test_a_dataclass_field_is_a_default_of_the_instances_made_while_it_holds() -
     assert (turns.TurnsConfig().turn_s, turns.COOLED_SHARE) == before
 
 
-def _row(name: str, seed: int, variant: str, cost: float, ref: float = 10.0) -> dict:
+def _row(
+    name: str, seed: int, variant: str, cost: float, ref: float = 10.0, optimal: bool = False
+) -> dict:
     return {"name": name, "family": name.split("/")[0], "seed": seed, "variant": variant,
-            "cost": cost, "free": 5.0, "ref_cost": ref}  # fmt: skip
+            "cost": cost, "free": 5.0, "ref_cost": ref, "optimal": optimal}  # fmt: skip
 
 
 def test_the_table_counts_wins_and_measures_against_the_best_at_the_end() -> None:
-    rows = [_row("w/0", 0, "A", 10.0), _row("w/0", 0, "B", 20.0, ref=20.0),
+    rows = [_row("w/0", 0, "A", 10.0, optimal=True), _row("w/0", 0, "B", 20.0, ref=20.0),
             _row("w/1", 0, "A", 30.0, ref=12.0), _row("w/1", 0, "B", 24.0, ref=12.0)]  # fmt: skip
     lines = table(rows).splitlines()
     (w,) = [line for line in lines if line.startswith("| w |")]
     # w/0: best 10 (A's run): A 1.0, B 0.5; delay (10 - 5) / (cost - 5): 1.0, 0.333. w/1:
     # best 12: A 0.4, B 0.5; delay 0.28, 0.368.
-    assert w == "| w | 2 | 0.7000 / 0.640 | 0.5000 / 0.351 | 1 / 1 |"
+    assert w == "| w | 2 | 0.7000 / 0.640 | 0.5000 / 0.351 | 1 / 1 | 1 / 0 |"
     assert any(line.startswith("| all | 2 |") for line in lines)
 
 
@@ -94,3 +96,31 @@ def test_variants_run_back_to_back_their_order_alternating(monkeypatch, tmp_path
     assert seen == [("w/0", 0.1), ("w/0", 0.2), ("w/1", 0.2), ("w/1", 0.1)] * 2
     assert [r["variant"] for r in results["rows"]] == ["A", "B", "B", "A"] * 2
     assert portfolio.MID_LNS_SHARE not in (0.1, 0.2)
+
+
+def test_conformance_sets_come_first_measured_against_their_optima(monkeypatch) -> None:
+    class FakeCase:
+        def __init__(self, name: str, ref_cost: float | None) -> None:
+            self.name, self.family, self.ref_cost, self.free = name, name[0], ref_cost, 1.0
+
+    asked: list[tuple] = []
+
+    def sets(names, per_set=None, objective=None):
+        asked.append((tuple(names), objective))
+        return [FakeCase("c/0", 8.0)]
+
+    monkeypatch.setattr(ab, "conformance_cases", sets)
+    monkeypatch.setattr(ab, "world_cases", lambda *a, **k: [FakeCase("w/0", None)])
+    monkeypatch.setattr(ab, "service_policy", lambda store: None)
+    monkeypatch.setattr(ab.anytime, "warm_up", lambda *a: None)
+    monkeypatch.setattr(ab, "request_key", lambda *a: "key")
+    monkeypatch.setattr(
+        ab.anytime, "run_method",
+        lambda method, case, budget, cfg, policy, seed=None: {
+            "name": case.name, "family": case.family, "seed": seed, "cost": 10.0,
+            "optimal": False, "free": 1.0},
+    )  # fmt: skip
+    results = ab.run(Config(sets=("wh_25",), solver_seeds=1, references=None), progress=False)
+    assert asked == [(("wh_25",), "avg_completion")]
+    assert [r["name"] for r in results["rows"]] == ["c/0", "c/0", "w/0", "w/0"]
+    assert [r["ratio"] for r in results["rows"][:2]] == [0.8, 0.8]  # against the optimum
