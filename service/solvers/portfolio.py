@@ -17,7 +17,9 @@ comes first, improving in stages:
    the instant answer only where no plan is found, then re-insertion search
    (:mod:`service.solvers.reinsert`: neighbourhoods repaired by prioritized planning,
    ~1-4 ms a step) and priority search in turns (:mod:`service.solvers.turns`), with
-   REINSERT_SHARE of the time left, or to the deadline where no later stage runs;
+   REINSERT_SHARE of the time left, or to the deadline where no later stage runs. Below
+   ``lns_min_conflicts`` too, from MID_TURNS_MIN_CONFLICTS, where less than
+   MID_TURNS_BELOW_S are left: the plans and the turns, with MID_TURNS_SHARE;
 3. **large-neighbourhood search** (above ``exact_max_conflicts`` up to
    ``exact_stage_max_conflicts``, for the objectives that are sums): CP-SAT re-plans
    a few robots at a time from the best answer so far (:mod:`service.solvers.lns`).
@@ -188,6 +190,26 @@ REINSERT_SHARE = 0.43
 # 0.9494 (two-lane 0.999 / 0.919, two-way 0.944 / 0.980). LNS pays on the two-way
 # warehouses from ~3 s; from 2 s it keeps them.
 MID_LNS_LEAST_S = 2.0
+# From MID_TURNS_MIN_CONFLICTS (and above ``exact_max_conflicts``) to below
+# ``lns_min_conflicts``, with less than MID_TURNS_BELOW_S left at the start (avg_completion,
+# avg_delay; not a re-schedule), the first stage is the plans then re-insertion and
+# priority search in turns for MID_TURNS_SHARE of the time left, in place of the policy's
+# large solver (priority_tabu); LNS and the CP-SAT stage follow as after it. Where LNS
+# converges on a local optimum (a plateau at the whole fleet unproven) the CP-SAT stage
+# of one worker rarely leaves it: wh_two_way/25/60 read 0.954 at 5 s, LNS done at 0.9 s.
+# Measured (session 42, ``python -m bench.ab``, interleaved, 1 s, turns first / not; every
+# problem of 60-700 conflicts turned first): generated wh_two_way 25 (210-252 conflicts),
+# wh_two_lane 25 (128-138), floor_dense 25 (146-172), floor_sparse 50 (515-540), three
+# worlds each, and the conformance sets wh_25, wh_50, wh_100, geo_dense_25 (four seeds):
+# avg_completion two-way 0.9852 / 0.9680 (8 cheaper, 2 dearer of 12), sparse floors 0.9775
+# / 0.9754 (7 / 1), two-lane 1.0000 / 0.9991, dense floors 1.0000 / 0.9996, the sets 0.9999
+# - 1.0000 either way (62 / 63 of 144 runs proven); avg_delay (two seeds) two-way 0.966 /
+# 0.896, sparse floors 0.984 / 0.967, but two-lane 0.984 / 0.999 (0 / 2) and dense floors
+# 0.989 / 1.000 (0 / 2): below 200 conflicts the plain order keeps them. Measured with
+# MID_TURNS_SHARE 0.3 in session 41: fewer proofs at 5 s; so short budgets only.
+MID_TURNS_BELOW_S = 2.0
+MID_TURNS_SHARE = 0.1
+MID_TURNS_MIN_CONFLICTS = 200
 # From ``lns_min_conflicts`` conflicts the first stage is the cheapest of PLANNED_ORDERS
 # prioritized plans of the whole fleet (:func:`~service.solvers.reinsert.planned_start`,
 # ~1-2 ms a plan at 100 robots, 8-18 ms at 250), not priority search from the blend with
@@ -271,8 +293,16 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
         and problem.n_conflicts > ctx.exact_max_conflicts
         and problem.n_conflicts >= ctx.lns_min_conflicts
     )
+    mid_turns = (  # the turns as a short budget's first stage below lns_min_conflicts
+        ctx.objective in REINSERT_OBJECTIVES
+        and max(ctx.exact_max_conflicts + 1, MID_TURNS_MIN_CONFLICTS)
+        <= problem.n_conflicts
+        < ctx.lns_min_conflicts
+        and ctx.warm is None
+        and deadline - time.monotonic() < MID_TURNS_BELOW_S
+    )
     # A re-schedule starts from its previous answer (tabu search, below), not from plans.
-    plans, planned = reinserts and ctx.warm is None, None
+    plans, planned = (reinserts or mid_turns) and ctx.warm is None, None
     if plans:
         until = time.monotonic() + PLANNED_SHARE * (deadline - time.monotonic())
         planned = planned_start(ctx, PLANNED_ORDERS, ctx.seed, until)
@@ -290,9 +320,10 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
         if found is not None and found_cost <= cost:
             best, cost = found, found_cost
             stages.append(first)
-    if reinserts:
+    if reinserts or mid_turns:
         left = deadline - time.monotonic()
-        until = time.monotonic() + REINSERT_SHARE * left if uses_lns else deadline
+        share = MID_TURNS_SHARE if mid_turns else REINSERT_SHARE
+        until = time.monotonic() + share * left if uses_lns else deadline
         turned = take_turns(ctx, best.assignment, cost, until, ctx.seed)
         if turned.cost < cost:
             best, cost = replace(best, assignment=turned.best), turned.cost

@@ -219,6 +219,55 @@ def test_from_lns_min_conflicts_re_insertion_follows_the_first_stage(
     assert answer.checks.acyclic and answer.checks.density
 
 
+@pytest.mark.parametrize(
+    ("below_s", "min_conflicts", "turns"), [(2.0, 0, True), (0.5, 0, False), (2.0, 10_000, False)]
+)
+def test_a_short_budget_below_lns_min_conflicts_starts_with_the_turns(
+    below_s: float, min_conflicts: int, turns: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Between exact_max_conflicts (and MID_TURNS_MIN_CONFLICTS) and lns_min_conflicts, a
+    budget under MID_TURNS_BELOW_S starts with the plans and the turns for MID_TURNS_SHARE
+    of the time left, in place of the large solver (priority_tabu); a longer budget or a
+    smaller problem with the large solver, not the turns. Either way LNS follows; the
+    answer is valid, no better than the proven optimum, and comes within the budget."""
+    import service.solvers.portfolio as portfolio
+
+    untils: list[float] = []
+    original = portfolio.take_turns
+
+    def recorded(ctx: Any, start: Any, cost: float, until: float, seed: int) -> Any:
+        untils.append(until)
+        return original(ctx, start, cost, until, seed)
+
+    searched: list[bool] = []
+    lns_search = portfolio.lns_search
+
+    def lns_recorded(*args: Any, **kwargs: Any) -> Any:
+        searched.append(True)
+        return lns_search(*args, **kwargs)
+
+    monkeypatch.setattr(portfolio, "take_turns", recorded)
+    monkeypatch.setattr(portfolio, "lns_search", lns_recorded)
+    monkeypatch.setattr(portfolio, "MID_TURNS_BELOW_S", below_s)
+    monkeypatch.setattr(portfolio, "MID_TURNS_MIN_CONFLICTS", min_conflicts)
+    line = json.loads((DATA / "wh_25.jsonl").read_text().splitlines()[0])
+    body = {**line["request"], "options": {"solver": "auto", "time_limit_s": 1.0}}
+    policy = DispatchPolicy(exact_max_conflicts=0, lns_min_conflicts=10_000)
+    start = time.monotonic()
+    answer = dispatch(ScheduleRequest.model_validate(body), policy)
+    assert time.monotonic() - start <= 1.1 + 0.15
+    if turns:
+        assert len(untils) == 1 and untils[0] < start + 0.25  # MID_TURNS_SHARE of ~1 s
+        assert answer.solver.detail.startswith("planned")
+        assert "priority_tabu" not in answer.solver.detail
+    else:
+        assert not untils
+        assert "priority_tabu" in answer.solver.detail
+    assert searched == [True]
+    assert answer.cost >= line["ref_cost"] * (1 - 1e-9)
+    assert answer.checks.acyclic and answer.checks.density
+
+
 def test_small_problems_go_straight_to_cp_sat_whatever_lns_min_conflicts_says() -> None:
     """At or below exact_max_conflicts no first stage, re-insertion or LNS runs, even with
     lns_min_conflicts lowered below it: CP-SAT proves the tiny problem."""
