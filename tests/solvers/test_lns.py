@@ -418,7 +418,7 @@ def test_auto_runs_lns_instead_of_cp_sat_from_its_threshold(
 
     monkeypatch.setattr(portfolio, "improve", no_cp_sat)
     monkeypatch.setattr(portfolio, "lns_search", counted)
-    monkeypatch.setattr(portfolio, "MID_LNS_LEAST_S", 0.0)
+    monkeypatch.setattr(portfolio, "MID_LNS_LEAST_S", dict.fromkeys(lns.LNS_OBJECTIVES, 0.0))
     line = _conformance("wh_50")
     body = {
         **line["request"],
