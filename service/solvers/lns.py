@@ -125,8 +125,13 @@ MAX_ROBOTS = 40
 # LNS, mean cost ratio against the 30-s references, three seeds): to 5 s 0.9322 without
 # (0.9309 / 0.9302 / 0.9355), 0.9561 with 10 (0.9569 / 0.9524 / 0.9591), 0.954 with 30
 # (two seeds); to 10 s 0.9668 -> 0.9815 (seed 0). At 250 robots LNS stays behind
-# priority_tabu either way (0.85-0.93 against ~0.96 at 5 s).
-BLOCKING_WEIGHT = 10.0
+# priority_tabu either way (0.85-0.93 against ~0.96 at 5 s). Re-measured (session 42,
+# ``python -m bench.ab``, ``auto`` at 5 s, interleaved run by run, 3 against 10): wh_two_way
+# and wh_two_lane of 100 robots, three worlds each, four seeds, 0.9732 / 0.9674 (15 cheaper,
+# 9 dearer), again on three other worlds each 0.9816 / 0.9765 (14 / 9); of 250 robots (two
+# seeds) 0.9218 / 0.9120 (8 / 4); wh_one_way, wh_mixed, wh_parked of 100 0.9773 / 0.9769
+# (5 / 7); the conformance sets and 25-50-robot worlds the same, 26 / 26 runs proven.
+BLOCKING_WEIGHT = 3.0
 # Time limit of one sub-problem; most are proven optimal well within it at 100 robots.
 SUB_TIME_S = 0.3
 # CP-SAT's presolve of a sub-problem took most of its time (0.1-0.2 s of domain
