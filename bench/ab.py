@@ -189,6 +189,7 @@ def table(rows: Sequence[dict[str, Any]]) -> str:
     costs: dict[str, dict[tuple[str, int], dict[str, float]]] = defaultdict(
         lambda: defaultdict(dict)
     )
+    proven: dict[str, dict[str, int]] = defaultdict(lambda: defaultdict(int))
     for r in rows:
         ref = best[r["name"]]
         for family in (r["family"], "all"):
@@ -196,9 +197,6 @@ def table(rows: Sequence[dict[str, Any]]) -> str:
                 (ref / r["cost"], delay_ratio(ref, r["cost"], r["free"]))
             )
             costs[family][(r["name"], r["seed"])][r["variant"]] = r["cost"]
-    proven: dict[str, dict[str, int]] = defaultdict(lambda: defaultdict(int))
-    for r in rows:
-        for family in (r["family"], "all"):
             proven[family][r["variant"]] += bool(r.get("optimal"))
     lines = [
         "| family | runs | A | B | A cheaper / dearer | proven A / B |",
