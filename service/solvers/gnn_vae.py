@@ -19,16 +19,23 @@ __all__ = ["DEFAULT_SAMPLES", "EMBED_S_PER_EDGE", "embed_fits", "gnn_vae", "samp
 
 # Samples per request when the request does not say: the published default.
 DEFAULT_SAMPLES = 100
-# The model's trunk runs once per request and cannot stop part-way: 0.6-0.8 s for 43,670
-# graph edges (250 robots, 21,835 conflicts) on the 2-core machine lightly loaded, up to
-# 1.8 s under a load of 3. Calibrated on the light load: at heavy load a request may
-# overrun by the trunk's excess, but the model is not dropped where it serves.
-EMBED_S_PER_EDGE = 1.5e-5
+# The least a request of the model costs, per graph edge: the trunk (once, and it cannot
+# stop part-way), the first chunk of draws decoded and evaluated, the cheapest refitted,
+# the answer checked and rendered. Measured (session 43, 2-vCPU Xeon, one process, seven
+# seeds, a 1-ms limit so that only the first chunk runs; ``solve_case`` of ``bench.cases``):
+# p50 3.3e-6 s per edge on generated warehouses of 100-250 robots (143 ms for the 43,670
+# edges of 250 two-way robots, 79 ms for 23,234 two-lane; slowest 3.7e-6), ~6 ms at 25
+# robots. Since the fused trunk (session 17) this is ~4x less than the 1.5e-5 calibrated
+# on the PyG trunk, which kept the model from every 250-robot request below ~1 s (FCFS
+# answered instead). Under heavy load a request may overrun by the excess of this
+# least part; the model is not dropped where it serves.
+EMBED_S_PER_EDGE = 4e-6
 
 
 def embed_fits(ctx: SolveContext, seconds: float) -> bool:
-    """Whether the model's trunk is expected to finish within ``seconds`` on ``ctx``'s graph
-    (edges: one per consecutive node pair of a robot, two per conflict)."""
+    """Whether the least part of a model request (the trunk, the first draws; see
+    EMBED_S_PER_EDGE) is expected to finish within ``seconds`` on ``ctx``'s graph (edges:
+    one per consecutive node pair of a robot, two per conflict)."""
     p = ctx.problem
     edges = p.n_nodes - p.n_robots + 2 * p.n_conflicts
     return EMBED_S_PER_EDGE * edges <= seconds
@@ -40,7 +47,8 @@ def gnn_vae(ctx: SolveContext) -> SolverOutput | None:
 
     Samples are decoded in memory-bounded chunks; once the time limit has passed no
     further chunk starts, and the answer says how many samples it is the best of. A
-    graph whose trunk alone would outlast the time limit gets no answer (None).
+    graph whose least model request (:func:`embed_fits`) would outlast the time limit
+    gets no answer (None).
     """
     stored = ctx.models.get(ctx.objective)
     if stored is None or not embed_fits(ctx, ctx.time_limit_s):

@@ -45,8 +45,8 @@ def gnn_vae_refined(ctx: SolveContext) -> SolverOutput | None:
     budget = min(REFINE_SECONDS, ctx.time_limit_s)
     samples = ctx.samples or DEFAULT_SAMPLES
     # The samples get at most half the budget (the first chunk always runs: at least the
-    # trunk); tabu the rest. A graph whose trunk would outlast the budget gets no samples:
-    # tabu from FCFS has it all.
+    # trunk); tabu the rest. A graph whose least model request (embed_fits) would outlast
+    # the budget gets no samples: tabu from FCFS has it all.
     starts = [plain_start(ctx)]
     sampled = None
     if embed_fits(ctx, budget):

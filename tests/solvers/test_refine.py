@@ -1,4 +1,5 @@
-"""gnn_vae_refined: valid, never worse than its starting points, deterministic for a seed."""
+"""gnn_vae_refined: valid, never worse than its starting points, deterministic for a seed;
+both model solvers without samples where the least model request outlasts the limit."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ from service.core.check import check
 from service.learning.generate import stitched_problem
 from service.learning.store import load_all
 from service.solvers.fcfs import fcfs
-from service.solvers.gnn_vae import gnn_vae
+from service.solvers.gnn_vae import EMBED_S_PER_EDGE, embed_fits, gnn_vae
 from service.solvers.refine import gnn_vae_refined
 from service.solvers.registry import SolveContext
 from tests.solvers.common import context, cost
@@ -50,3 +51,28 @@ def test_refined_is_deterministic_when_tabu_ends_by_patience(models: dict) -> No
 
 def test_refined_without_a_model_has_no_answer() -> None:
     assert gnn_vae_refined(_ctx(0, "avg_completion", {})) is None
+
+
+def _least_request_s(ctx: SolveContext) -> float:
+    """The least model request :func:`embed_fits` expects on ``ctx``'s graph."""
+    p = ctx.problem
+    return EMBED_S_PER_EDGE * (p.n_nodes - p.n_robots + 2 * p.n_conflicts)
+
+
+def test_a_limit_below_the_least_model_request_gets_no_samples(models: dict) -> None:
+    least = _least_request_s(_ctx(0, "avg_completion", models))
+    short = _ctx(0, "avg_completion", models, time_limit_s=0.9 * least)
+    assert not embed_fits(short, short.time_limit_s)
+    assert gnn_vae(short) is None  # the dispatcher falls back
+    refined = gnn_vae_refined(short)
+    assert refined is not None and refined.samples == 0
+    assert "too large for the model" in refined.detail
+    assert check(short.problem, short.cliques, refined.assignment).ok.all()
+
+
+def test_a_limit_at_the_least_model_request_samples(models: dict) -> None:
+    ctx = _ctx(0, "avg_completion", models)
+    fits = _ctx(0, "avg_completion", models, time_limit_s=_least_request_s(ctx))
+    assert embed_fits(fits, fits.time_limit_s)
+    out = gnn_vae(fits)
+    assert out is not None and out.samples >= 1
