@@ -191,7 +191,11 @@ class PathsRequest(BaseModel):
 
 
 def request_form(body: object) -> Literal["paths", "graph"]:
-    """Which form a raw request body uses: ``paths`` when its first robot has a ``path``."""
+    """Which form a request body uses: ``paths`` when its first robot has a ``path`` (raw),
+    or when it is already a :class:`PathsRequest` (validated from its JSON bytes, see
+    :mod:`service.api.body`)."""
+    if isinstance(body, PathsRequest):
+        return "paths"
     if isinstance(body, dict):
         robots = body.get("robots")
         if isinstance(robots, list) and robots and isinstance(robots[0], dict):

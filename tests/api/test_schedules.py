@@ -184,3 +184,64 @@ async def test_the_paths_routes_answer_what_their_models_encode(client: httpx.As
     run = await client.post("/v1/simulations", json=body)
     assert run.status_code == 200, run.text
     assert run.json() == jsonable_encoder(simulate(SimulationRequest.model_validate(body)))
+
+
+def _by_fastapi(monkeypatch: pytest.MonkeyPatch) -> None:
+    """No fast parse: every body left to FastAPI (decoded, then validated)."""
+    from service.api import body
+
+    monkeypatch.setattr(body, "_validated", lambda model, raw: None)
+
+
+@pytest.mark.parametrize("form", ["graph", "paths"])
+async def test_a_json_body_is_validated_from_its_bytes_as_fastapi_would(
+    client: httpx.AsyncClient,
+    tiny: dict[str, Any],
+    monkeypatch: pytest.MonkeyPatch,
+    form: str,
+) -> None:
+    """A body declared JSON is validated from its bytes: with FastAPI's own decoding
+    (Starlette's ``Request.json``) broken, both forms of ``/v1/schedules`` and both paths
+    routes still answer, and the schedules are those of the same body that FastAPI parsed
+    itself."""
+    from pathlib import Path
+
+    from starlette import requests
+
+    examples = Path(__file__).resolve().parents[2] / "schemas" / "examples" / "paths"
+    paths = json.loads((examples / "wh_two_lane_12.json").read_text())
+    request = tiny if form == "graph" else paths
+    with monkeypatch.context() as patched:
+        _by_fastapi(patched)
+        reference = await post_json(client, request)
+    assert reference.status_code == 200, reference.text
+
+    async def broken(self: requests.Request) -> Any:
+        raise AssertionError("FastAPI decoded the body")
+
+    monkeypatch.setattr(requests.Request, "json", broken)
+    answer = await post_json(client, request)
+    assert answer.status_code == 200, answer.text
+    timed = ("solver", "timings")  # runtimes differ from run to run
+    assert {k: v for k, v in answer.json().items() if k not in timed} == {
+        k: v for k, v in reference.json().items() if k not in timed
+    }
+    if form == "paths":
+        graph = await client.post("/v1/coordination-graphs", json=paths)
+        assert graph.status_code == 200, graph.text
+        run = {"robots": paths["robots"], "dependencies": answer.json()["dependencies"]}
+        simulated = await client.post("/v1/simulations", json=run)
+        assert simulated.status_code == 200, simulated.text
+
+
+async def test_a_body_failing_the_fast_parse_is_named_by_fastapi_as_before(
+    client: httpx.AsyncClient, tiny: dict[str, Any], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """An invalid body gets FastAPI's own 422, as without the fast parse: that only ever
+    passes a valid model on."""
+    tiny["robots"][0]["nodes"][0]["exit"] = "soon"
+    answer = await post_json(client, tiny)
+    _by_fastapi(monkeypatch)
+    reference = await post_json(client, tiny)
+    assert answer.status_code == reference.status_code == 422
+    assert answer.json() == reference.json()

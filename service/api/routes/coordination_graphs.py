@@ -6,7 +6,7 @@ from functools import partial
 
 from fastapi import APIRouter, Depends, Response
 
-from service.api.body_limit import BodyLimitRoute
+from service.api.body import BodyRoute
 from service.api.deps import RuntimeDep, SettingsDep, require_token
 from service.api.encoding import json_response, with_json
 from service.api.paths import check_path_caps, geometry_settings, run_paths_work
@@ -16,7 +16,7 @@ from service.motion.plan import coordination_graph
 __all__ = ["router"]
 
 router = APIRouter(
-    prefix="/v1", tags=["paths"], route_class=BodyLimitRoute, dependencies=[Depends(require_token)]
+    prefix="/v1", tags=["paths"], route_class=BodyRoute, dependencies=[Depends(require_token)]
 )
 
 

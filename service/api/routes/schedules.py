@@ -8,7 +8,7 @@ from typing import Annotated
 from fastapi import APIRouter, Depends, Response
 from pydantic import Discriminator, Tag
 
-from service.api.body_limit import BodyLimitRoute
+from service.api.body import BodyRoute
 from service.api.deps import MetricsDep, ReadyRuntimeDep, RecordDep, SettingsDep, require_token
 from service.api.encoding import json_response, with_json
 from service.api.errors import TooLarge
@@ -27,7 +27,7 @@ __all__ = ["router"]
 router = APIRouter(
     prefix="/v1",
     tags=["schedules"],
-    route_class=BodyLimitRoute,
+    route_class=BodyRoute,
     dependencies=[Depends(require_token)],
 )
 

@@ -6,7 +6,7 @@ from functools import partial
 
 from fastapi import APIRouter, Depends, Response
 
-from service.api.body_limit import BodyLimitRoute
+from service.api.body import BodyRoute
 from service.api.deps import RuntimeDep, SettingsDep, require_token
 from service.api.encoding import json_response, with_json
 from service.api.errors import TooLarge
@@ -17,7 +17,7 @@ from service.simulation.simulate import simulate
 __all__ = ["router"]
 
 router = APIRouter(
-    prefix="/v1", tags=["paths"], route_class=BodyLimitRoute, dependencies=[Depends(require_token)]
+    prefix="/v1", tags=["paths"], route_class=BodyRoute, dependencies=[Depends(require_token)]
 )
 
 
