@@ -1,5 +1,6 @@
 """gnn_vae_refined: valid, never worse than its starting points, deterministic for a seed;
-both model solvers without samples where the least model request outlasts the limit."""
+both model solvers without samples where the least model request outlasts the limit (refined:
+more than a share of it)."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from service.learning.generate import stitched_problem
 from service.learning.store import load_all
 from service.solvers.fcfs import fcfs
 from service.solvers.gnn_vae import EMBED_S_PER_EDGE, embed_fits, gnn_vae
-from service.solvers.refine import gnn_vae_refined
+from service.solvers.refine import SAMPLES_LEAST_SHARE, gnn_vae_refined
 from service.solvers.registry import SolveContext
 from tests.solvers.common import context, cost
 
@@ -64,10 +65,24 @@ def test_a_limit_below_the_least_model_request_gets_no_samples(models: dict) -> 
     short = _ctx(0, "avg_completion", models, time_limit_s=0.9 * least)
     assert not embed_fits(short, short.time_limit_s)
     assert gnn_vae(short) is None  # the dispatcher falls back
-    refined = gnn_vae_refined(short)
+    _assert_refined_without_samples(short)
+
+
+def _assert_refined_without_samples(ctx: SolveContext) -> None:
+    refined = gnn_vae_refined(ctx)
     assert refined is not None and refined.samples == 0
     assert "too large for the model" in refined.detail
-    assert check(short.problem, short.cliques, refined.assignment).ok.all()
+    assert check(ctx.problem, ctx.cliques, refined.assignment).ok.all()
+
+
+def test_refined_samples_only_where_the_least_model_request_is_a_small_share(
+    models: dict,
+) -> None:
+    least = _least_request_s(_ctx(0, "avg_completion", models))
+    enough = least / SAMPLES_LEAST_SHARE
+    _assert_refined_without_samples(_ctx(0, "avg_completion", models, 0.9 * enough))
+    refined = gnn_vae_refined(_ctx(0, "avg_completion", models, 1.1 * enough))
+    assert refined is not None and refined.samples >= 1
 
 
 def test_a_limit_at_the_least_model_request_samples(models: dict) -> None:
