@@ -179,3 +179,11 @@ def long_chain(robots: int, chain: int, time_limit_s: float = 1.0) -> dict[str, 
         )
         request["conflicts"] += [{"a": f"L{base + 3 * j}", "b": f"r{r}n{j}"} for j in (0, 2)]
     return request
+
+
+def without_fast_parse(monkeypatch: pytest.MonkeyPatch) -> None:
+    """No body validated from its bytes (:mod:`service.api.body`): every body left to
+    FastAPI (decoded, then validated), as before session 43."""
+    from service.api import body
+
+    monkeypatch.setattr(body, "_validated", lambda model, raw: None)

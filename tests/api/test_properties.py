@@ -9,7 +9,10 @@ with a 4xx naming the cause.
 
 from __future__ import annotations
 
+import json
 import time
+from pathlib import Path
+from typing import Any
 
 import httpx
 import pytest
@@ -19,9 +22,17 @@ from hypothesis import strategies as st
 from service.core.schemas import OBJECTIVES
 from service.learning.generate import small_problem
 
-from .helpers import assert_valid_answer, long_chain, multipartite, post_json
+from .helpers import (
+    assert_valid_answer,
+    long_chain,
+    multipartite,
+    post_json,
+    without_fast_parse,
+)
 
 pytestmark = pytest.mark.anyio
+
+PATHS_EXAMPLE = Path(__file__).resolve().parents[2] / "schemas/examples/paths/wh_two_lane_12.json"
 
 
 @settings(
@@ -134,3 +145,81 @@ async def test_deep_or_wide_json_is_never_a_5xx(
             "/v1/schedules", content=body, headers={"content-type": "application/json"}
         )
         assert response.status_code == 422, response.text
+
+
+# Values an edit puts in a body: plausible ones (times, counts, ids, names), which often
+# leave it valid, and any JSON at all.
+JSON_VALUES = st.one_of(
+    st.floats(0.0, 10.0),
+    st.integers(0, 3),
+    st.sampled_from(["r1/a", "r2/b", "fcfs", "exact", "avg_delay"]),
+    st.recursive(
+        st.none()
+        | st.booleans()
+        | st.integers(-(10**30), 10**30)
+        | st.floats()  # NaN and infinities included (sent as JS literals)
+        | st.text(max_size=6),
+        lambda inner: (
+            st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=4), inner, max_size=3)
+        ),
+        max_leaves=4,
+    ),
+)
+# Where an edit lands in the paths example or in tiny.json: (form, keys from the top).
+EDIT_PLACES = [
+    ("graph", ()), ("graph", ("robots",)), ("graph", ("robots", 0)),
+    ("graph", ("robots", 0, "nodes", 1)), ("graph", ("robots", 0, "nodes", 1, "enter")),
+    ("graph", ("robots", 0, "nodes", 1, "density")), ("graph", ("robots", 2, "goal_time")),
+    ("graph", ("conflicts", 0, "a_enter")), ("graph", ("conflicts", 1, "b")),
+    ("graph", ("objective",)), ("graph", ("options", "seed")), ("graph", ("options",)),
+    ("graph", ("options", "time_limit_s")), ("graph", ("density_limits",)),
+    ("paths", ("robots", 0, "path", 1)), ("paths", ("robots", 0, "path", 1, 0)),
+    ("paths", ("robots", 1, "speed")), ("paths", ("robots", 1)), ("paths", ("options",)),
+]  # fmt: skip
+
+
+def _edited(body: object, place: tuple[str | int, ...], key: str, value: object) -> object:
+    """``body`` with the value at ``place`` replaced by ``value`` (or, at an object, ``key``
+    set to it); unchanged where ``place`` does not exist."""
+    if not place:
+        return {**body, key: value} if isinstance(body, dict) else value
+    head, rest = place[0], place[1:]
+    if isinstance(body, dict) and isinstance(head, str) and head in body:
+        return {**body, head: _edited(body[head], rest, key, value)}
+    if isinstance(body, list) and isinstance(head, int) and head < len(body):
+        return [*body[:head], _edited(body[head], rest, key, value), *body[head + 1 :]]
+    return body
+
+
+@settings(
+    max_examples=60,
+    deadline=None,
+    suppress_health_check=[HealthCheck.function_scoped_fixture],
+    derandomize=True,
+)
+@given(
+    where=st.sampled_from(EDIT_PLACES),
+    key=st.sampled_from(["options", "robots", "speed", "x"]),
+    value=JSON_VALUES,
+)
+async def test_bodies_validated_from_bytes_answer_as_fastapi_would(
+    client: httpx.AsyncClient,
+    tiny: dict[str, Any],
+    where: tuple[str, tuple[str | int, ...]],
+    key: str,
+    value: object,
+) -> None:
+    """Whatever a body holds, validating it from its bytes (``service.api.body``) gives
+    the same status and answer as FastAPI's own decoding and validation."""
+    form, place = where
+    base = tiny if form == "graph" else json.loads(PATHS_EXAMPLE.read_text())
+    body = _edited({**base, "options": {"solver": "fcfs"}}, place, key, value)
+    answer = await post_json(client, body)
+    with pytest.MonkeyPatch.context() as patched:
+        without_fast_parse(patched)
+        reference = await post_json(client, body)
+    assert answer.status_code == reference.status_code, (answer.text, reference.text)
+    timed = ("solver", "timings")  # runtimes differ from run to run
+    assert {k: v for k, v in answer.json().items() if k not in timed} == {
+        k: v for k, v in reference.json().items() if k not in timed
+    }

@@ -14,7 +14,7 @@ from service.core.schemas import OBJECTIVES, SOLVER_NAMES
 from service.learning import infer
 from service.learning.generate import stitched_problem
 
-from .helpers import assert_valid_answer, long_chain, post_json
+from .helpers import assert_valid_answer, long_chain, post_json, without_fast_parse
 
 pytestmark = pytest.mark.anyio
 
@@ -186,13 +186,6 @@ async def test_the_paths_routes_answer_what_their_models_encode(client: httpx.As
     assert run.json() == jsonable_encoder(simulate(SimulationRequest.model_validate(body)))
 
 
-def _by_fastapi(monkeypatch: pytest.MonkeyPatch) -> None:
-    """No fast parse: every body left to FastAPI (decoded, then validated)."""
-    from service.api import body
-
-    monkeypatch.setattr(body, "_validated", lambda model, raw: None)
-
-
 @pytest.mark.parametrize("form", ["graph", "paths"])
 async def test_a_json_body_is_validated_from_its_bytes_as_fastapi_would(
     client: httpx.AsyncClient,
@@ -212,7 +205,7 @@ async def test_a_json_body_is_validated_from_its_bytes_as_fastapi_would(
     paths = json.loads((examples / "wh_two_lane_12.json").read_text())
     request = tiny if form == "graph" else paths
     with monkeypatch.context() as patched:
-        _by_fastapi(patched)
+        without_fast_parse(patched)
         reference = await post_json(client, request)
     assert reference.status_code == 200, reference.text
 
@@ -241,7 +234,7 @@ async def test_a_body_failing_the_fast_parse_is_named_by_fastapi_as_before(
     passes a valid model on."""
     tiny["robots"][0]["nodes"][0]["exit"] = "soon"
     answer = await post_json(client, tiny)
-    _by_fastapi(monkeypatch)
+    without_fast_parse(monkeypatch)
     reference = await post_json(client, tiny)
     assert answer.status_code == reference.status_code == 422
     assert answer.json() == reference.json()
