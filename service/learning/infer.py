@@ -73,12 +73,14 @@ BID_NOISE = 0.5
 
 @dataclass(frozen=True)
 class Sampled:
-    """The cheapest decoded sample, types refitted (a batch of one), its cost, and how
-    many were decoded."""
+    """The cheapest decoded sample, types refitted (a batch of one), its cost, how many
+    were decoded, and each decoded draw's bids of the robots' first nodes: the robots'
+    priorities in that draw (a robot's first node's rank is its bid)."""
 
     assignment: Assignments
     cost: float
     samples: int
+    priorities: np.ndarray  # (samples, R) float > 0, lower: the robot passes first
 
 
 def chunk_rows(problem: Problem, hidden: int) -> int:
@@ -207,9 +209,11 @@ def sample_best(
     first = FIRST_TIMED_ROWS if timed else None
     chunks = propose_chunks(model, graph, samples, seed, rows, first, decoder.scored())
     best: list[tuple[float, int, Assignments]] = []  # the REFIT_TOP cheapest so far
+    priorities = []  # per chunk (n, R)
     decoded, started = 0, time.monotonic()
     bids, probs = next(chunks)
     while True:
+        priorities.append(bids[:, decoder.problem.robot_start[:-1]])
         candidates = decode_candidates(decoder, bids, probs, objective)
         costs = evaluator.evaluate(candidates).costs[objective]  # (n,) or (2n,)
         for row in np.argsort(costs, kind="stable")[:REFIT_TOP].tolist():
@@ -225,7 +229,7 @@ def sample_best(
         bids, probs = chunks.send(fit)
     refitted = [refit_types(decoder, evaluator, objective, draw) for _, _, draw in best]
     found, cost = min(refitted, key=lambda pair: pair[1])  # first of equals: the cheaper draw
-    return Sampled(found, cost, decoded)
+    return Sampled(found, cost, decoded, np.concatenate(priorities))
 
 
 def _unchunked_row(row: int, lo: int, n: int, samples: int) -> int:

@@ -93,6 +93,7 @@ __all__ = [
     "REINSERT_OBJECTIVES",
     "ReinsertConfig",
     "ReinsertResult",
+    "cheapest_plan",
     "planned_start",
     "reinsert_search",
 ]
@@ -919,20 +920,28 @@ def planned_start(
     free_start = np.full(p.n_robots, np.inf)  # (R,) each robot's first time point
     np.minimum.at(free_start, p.tp_robot, p.tp_time)
     rng = np.random.default_rng(seed)
-    every = np.arange(p.n_robots)
+    rules = [np.argsort(free_end - free_start, kind="stable"), np.argsort(free_end, kind="stable")]
+    ordered = rules[:orders] + [rng.permutation(p.n_robots) for _ in range(orders - 2)]
+    return cheapest_plan(ctx, ordered, until, least=1)
+
+
+def cheapest_plan(
+    ctx: SolveContext, orders: list[np.ndarray], until: float, least: int = 0
+) -> tuple[Assignments, float] | None:
+    """The cheapest prioritized plan of the whole fleet (:func:`_plan`) in the ``orders``
+    (each (R,), robots in the order they are placed) tried until ``until`` (monotonic),
+    ``least`` of them whatever the time -> (answer, cost), or None where none was made or
+    fixed directions left each plan tried without a passage for some robot."""
+    if not orders or (least < 1 and time.monotonic() >= until):
+        return None
+    every = np.arange(ctx.problem.n_robots)
     fixed = _fixed_between(_Static.of(ctx), every, True)
     reach = _plan_reach(ctx, fixed)
     weight = ctx.evaluator.objective_weights(ctx.objective)
     found = None
-    for k in range(orders):
-        if k and time.monotonic() >= until:
+    for k, order in enumerate(orders):
+        if k >= least and time.monotonic() >= until:
             break
-        if k == 0:
-            order = np.argsort(free_end - free_start, kind="stable")
-        elif k == 1:
-            order = np.argsort(free_end, kind="stable")
-        else:
-            order = rng.permutation(p.n_robots)
         plan = _plan(ctx, order, fixed, weight, reach)
         if plan is None:
             continue

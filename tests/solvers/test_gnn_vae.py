@@ -1,0 +1,74 @@
+"""gnn_vae's plans in its draws' robot orders: valid, never dearer than the decoded draws,
+only from PLANNED_MIN_CONFLICTS conflicts, and none past the deadline."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from service.core.check import check
+from service.learning.generate import stitched_problem
+from service.learning.store import load_all
+from service.solvers import gnn_vae as gnn
+from service.solvers.registry import SolveContext
+from tests.solvers.common import context, cost
+
+STORE = Path(__file__).resolve().parents[2] / "model_store"
+
+
+@pytest.fixture(scope="module")
+def models() -> dict:
+    loaded, errors = load_all(STORE, ("avg_completion", "avg_delay", "max_completion"))
+    assert not errors
+    return loaded
+
+
+def _ctx(seed: int, objective: str, models: dict) -> SolveContext:
+    return context(
+        stitched_problem(seed, 40, 4.0, objective), objective, 30.0, seed=1, models=models
+    )
+
+
+@pytest.mark.parametrize("objective", ["avg_completion", "avg_delay"])
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_plans_in_the_draws_orders_are_valid_and_never_dearer(
+    models: dict, monkeypatch: pytest.MonkeyPatch, seed: int, objective: str
+) -> None:
+    ctx = _ctx(seed, objective, models)
+    samples = gnn.DEFAULT_SAMPLES
+    decoded = gnn.sample_model(ctx, models[objective], samples, time.monotonic() + 30.0)
+    assert decoded.priorities.shape == (samples, ctx.problem.n_robots)
+    monkeypatch.setattr(gnn, "PLANNED_MIN_CONFLICTS", 0)
+    planned = gnn.planned_draws(ctx, decoded, time.monotonic() + 30.0)
+    assert planned is not None
+    assert check(ctx.problem, ctx.cliques, planned[0]).ok.all()
+    assert planned[1] == ctx.evaluator.evaluate(planned[0]).costs[objective][0]
+    out = gnn.gnn_vae(ctx)  # the same draws (same seed), then the same plans
+    assert check(ctx.problem, ctx.cliques, out.assignment).ok.all()
+    assert cost(ctx, out) == min(decoded.cost, planned[1])
+    assert (planned[1] < decoded.cost) == ("a plan in a draw's robot order" in (out.detail or ""))
+
+
+def test_below_the_threshold_or_past_the_deadline_the_decoded_draws_answer(
+    models: dict, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    ctx = _ctx(3, "avg_completion", models)
+    assert ctx.problem.n_conflicts < gnn.PLANNED_MIN_CONFLICTS
+    decoded = gnn.sample_model(ctx, models["avg_completion"], 100, time.monotonic() + 30.0)
+    out = gnn.gnn_vae(ctx)
+    assert np.array_equal(out.assignment.a_first, decoded.assignment.a_first)
+    assert np.array_equal(out.assignment.following, decoded.assignment.following)
+    monkeypatch.setattr(gnn, "PLANNED_MIN_CONFLICTS", 0)
+    assert gnn.planned_draws(ctx, decoded, time.monotonic() - 1.0) is None
+
+
+def test_no_plans_for_the_objectives_plans_do_not_serve(
+    models: dict, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(gnn, "PLANNED_MIN_CONFLICTS", 0)
+    ctx = _ctx(4, "max_completion", models)
+    decoded = gnn.sample_model(ctx, models["max_completion"], 10, time.monotonic() + 30.0)
+    assert gnn.planned_draws(ctx, decoded, time.monotonic() + 30.0) is None
