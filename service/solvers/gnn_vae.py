@@ -77,7 +77,8 @@ def gnn_vae(ctx: SolveContext) -> SolverOutput | None:
     Samples are decoded in memory-bounded chunks; once the time limit has passed no
     further chunk starts, and the answer says how many samples it is the best of. A
     graph whose least model request (:func:`embed_fits`) would outlast the time limit
-    gets no answer (None).
+    gets no answer (None). From PLANNED_MIN_CONFLICTS conflicts a plan in a draw's robot
+    order answers where it is cheaper (:func:`planned_draws`, within the time limit).
     """
     stored = ctx.models.get(ctx.objective)
     if stored is None or not embed_fits(ctx, ctx.time_limit_s):
