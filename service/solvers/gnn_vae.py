@@ -24,6 +24,7 @@ __all__ = [
     "EMBED_S_PER_EDGE",
     "PLANNED_DRAWS",
     "PLANNED_MIN_CONFLICTS",
+    "drawn_or_planned",
     "embed_fits",
     "gnn_vae",
     "planned_draws",
@@ -89,9 +90,8 @@ def gnn_vae(ctx: SolveContext) -> SolverOutput | None:
     notes = []
     if best.samples < samples:
         notes.append(f"time limit reached after {best.samples} of {samples} samples")
-    answer, planned = best.assignment, planned_draws(ctx, best, deadline)
-    if planned is not None and planned[1] < best.cost:
-        answer = planned[0]
+    answer, plan = drawn_or_planned(ctx, best, deadline)
+    if plan:
         notes.append("a plan in a draw's robot order was cheaper than the decoded draws")
     return SolverOutput(
         answer,
@@ -100,6 +100,18 @@ def gnn_vae(ctx: SolveContext) -> SolverOutput | None:
         samples=best.samples,
         detail="; ".join(notes) or None,
     )
+
+
+def drawn_or_planned(
+    ctx: SolveContext, sampled: Sampled, deadline: float
+) -> tuple[Assignments, bool]:
+    """``sampled``'s best decoded draw, or the cheapest plan in its draws' robot orders
+    (:func:`planned_draws`, made until ``deadline``) where that is cheaper -> (answer,
+    whether a plan)."""
+    planned = planned_draws(ctx, sampled, deadline)
+    if planned is not None and planned[1] < sampled.cost:
+        return planned[0], True
+    return sampled.assignment, False
 
 
 def planned_draws(

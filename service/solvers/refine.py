@@ -1,6 +1,8 @@
 """The GNN-VAE refined by local search: the published "Ours*".
 
-``gnn_vae_refined`` decodes the GNN-VAE's samples, takes the cheapest, and
+``gnn_vae_refined`` decodes the GNN-VAE's samples, takes the cheapest (from
+1,000 conflicts, or a plan in the draws' orders where cheaper: see
+:func:`~service.solvers.gnn_vae.drawn_or_planned`), and
 runs tabu search (:mod:`service.solvers.tabu`) from it and from FCFS (or the
 warm start of a re-schedule, if cheaper), each
 with half of what is left of a 1 s budget (or of the request's time limit, if
@@ -25,7 +27,12 @@ import time
 
 import numpy as np
 
-from service.solvers.gnn_vae import DEFAULT_SAMPLES, embed_fits, sample_model
+from service.solvers.gnn_vae import (
+    DEFAULT_SAMPLES,
+    drawn_or_planned,
+    embed_fits,
+    sample_model,
+)
 from service.solvers.registry import SolveContext, SolverOutput, register
 from service.solvers.tabu import plain_start, tabu_search
 
@@ -45,7 +52,8 @@ SAMPLES_LEAST_SHARE = 0.25
 
 @register("gnn_vae_refined")
 def gnn_vae_refined(ctx: SolveContext) -> SolverOutput | None:
-    """Tabu search from the GNN-VAE's best sample and from FCFS; the better result, within 1 s."""
+    """Tabu search from the GNN-VAE's best sample (or a plan in its draws' orders, where
+    cheaper) and from FCFS; the better result, within 1 s."""
     stored = ctx.models.get(ctx.objective)
     if stored is None:
         return None
@@ -55,11 +63,14 @@ def gnn_vae_refined(ctx: SolveContext) -> SolverOutput | None:
     # The samples get at most half the budget (the first chunk always runs: at least the
     # trunk); tabu the rest. A graph whose least model request (embed_fits) takes more
     # than SAMPLES_LEAST_SHARE of the budget gets no samples: tabu from FCFS has it all.
+    # From PLANNED_MIN_CONFLICTS conflicts the model's start is the cheaper of its best
+    # draw and the plans in its draws' orders, made within the same half.
     starts = [plain_start(ctx)]
     sampled = None
     if embed_fits(ctx, SAMPLES_LEAST_SHARE * budget):
-        sampled = sample_model(ctx, stored, samples, time.monotonic() + budget / 2)
-        starts.insert(0, sampled.assignment)
+        half = time.monotonic() + budget / 2
+        sampled = sample_model(ctx, stored, samples, half)
+        starts.insert(0, drawn_or_planned(ctx, sampled, half)[0])
     best, best_cost, iterations = starts[0], np.inf, 0
     for k, tabu_start in enumerate(starts):
         left = (budget - (time.perf_counter() - start)) / (len(starts) - k)  # shared

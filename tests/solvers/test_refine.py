@@ -91,3 +91,28 @@ def test_a_limit_at_the_least_model_request_samples(models: dict) -> None:
     assert embed_fits(fits, fits.time_limit_s)
     out = gnn_vae(fits)
     assert out is not None and out.samples >= 1
+
+
+def test_refined_starts_from_a_plan_in_the_draws_orders_where_cheaper(
+    models: dict, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """From PLANNED_MIN_CONFLICTS conflicts the model's start is the cheaper of its best
+    draw and the plans in its draws' orders; tabu never ends above its start."""
+    from service.solvers import gnn_vae as gnn
+    from service.solvers import refine
+
+    monkeypatch.setattr(gnn, "PLANNED_MIN_CONFLICTS", 0)
+    starts: list[float] = []
+
+    def spied(ctx: SolveContext, sampled: object, deadline: float) -> tuple:
+        answer, plan = gnn.drawn_or_planned(ctx, sampled, deadline)
+        starts.append(float(ctx.evaluator.evaluate(answer).costs[ctx.objective][0]))
+        assert starts[-1] <= sampled.cost
+        return answer, plan
+
+    monkeypatch.setattr(refine, "drawn_or_planned", spied)
+    ctx = _ctx(5, "avg_completion", models)
+    out = gnn_vae_refined(ctx)
+    assert out is not None and out.samples >= 1 and len(starts) == 1
+    assert check(ctx.problem, ctx.cliques, out.assignment).ok.all()
+    assert cost(ctx, out) <= starts[0] + 1e-9
