@@ -27,6 +27,7 @@ __all__ = [
     "drawn_or_planned",
     "embed_fits",
     "gnn_vae",
+    "least_request_s",
     "planned_draws",
     "sample_model",
 ]
@@ -62,13 +63,17 @@ PLANNED_MIN_CONFLICTS = 1_000
 PLANNED_DRAWS = 4
 
 
+def least_request_s(ctx: SolveContext) -> float:
+    """The least a model request is expected to take on ``ctx``'s graph (EMBED_S_PER_EDGE
+    per edge: one per consecutive node pair of a robot, two per conflict)."""
+    p = ctx.problem
+    return EMBED_S_PER_EDGE * (p.n_nodes - p.n_robots + 2 * p.n_conflicts)
+
+
 def embed_fits(ctx: SolveContext, seconds: float) -> bool:
     """Whether the least part of a model request (the trunk, the first draws; see
-    EMBED_S_PER_EDGE) is expected to finish within ``seconds`` on ``ctx``'s graph (edges:
-    one per consecutive node pair of a robot, two per conflict)."""
-    p = ctx.problem
-    edges = p.n_nodes - p.n_robots + 2 * p.n_conflicts
-    return EMBED_S_PER_EDGE * edges <= seconds
+    :func:`least_request_s`) is expected to finish within ``seconds``."""
+    return least_request_s(ctx) <= seconds
 
 
 @register("gnn_vae")

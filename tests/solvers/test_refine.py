@@ -12,7 +12,7 @@ from service.core.check import check
 from service.learning.generate import stitched_problem
 from service.learning.store import load_all
 from service.solvers.fcfs import fcfs
-from service.solvers.gnn_vae import EMBED_S_PER_EDGE, embed_fits, gnn_vae
+from service.solvers.gnn_vae import embed_fits, gnn_vae, least_request_s
 from service.solvers.refine import SAMPLES_LEAST_SHARE, gnn_vae_refined
 from service.solvers.registry import SolveContext
 from tests.solvers.common import context, cost
@@ -54,14 +54,8 @@ def test_refined_without_a_model_has_no_answer() -> None:
     assert gnn_vae_refined(_ctx(0, "avg_completion", {})) is None
 
 
-def _least_request_s(ctx: SolveContext) -> float:
-    """The least model request :func:`embed_fits` expects on ``ctx``'s graph."""
-    p = ctx.problem
-    return EMBED_S_PER_EDGE * (p.n_nodes - p.n_robots + 2 * p.n_conflicts)
-
-
 def test_a_limit_below_the_least_model_request_gets_no_samples(models: dict) -> None:
-    least = _least_request_s(_ctx(0, "avg_completion", models))
+    least = least_request_s(_ctx(0, "avg_completion", models))
     short = _ctx(0, "avg_completion", models, time_limit_s=0.9 * least)
     assert not embed_fits(short, short.time_limit_s)
     assert gnn_vae(short) is None  # the dispatcher falls back
@@ -78,7 +72,7 @@ def _assert_refined_without_samples(ctx: SolveContext) -> None:
 def test_refined_samples_only_where_the_least_model_request_is_a_small_share(
     models: dict,
 ) -> None:
-    least = _least_request_s(_ctx(0, "avg_completion", models))
+    least = least_request_s(_ctx(0, "avg_completion", models))
     enough = least / SAMPLES_LEAST_SHARE
     _assert_refined_without_samples(_ctx(0, "avg_completion", models, 0.9 * enough))
     refined = gnn_vae_refined(_ctx(0, "avg_completion", models, 1.1 * enough))
@@ -87,7 +81,7 @@ def test_refined_samples_only_where_the_least_model_request_is_a_small_share(
 
 def test_a_limit_at_the_least_model_request_samples(models: dict) -> None:
     ctx = _ctx(0, "avg_completion", models)
-    fits = _ctx(0, "avg_completion", models, time_limit_s=_least_request_s(ctx))
+    fits = _ctx(0, "avg_completion", models, time_limit_s=least_request_s(ctx))
     assert embed_fits(fits, fits.time_limit_s)
     out = gnn_vae(fits)
     assert out is not None and out.samples >= 1
