@@ -29,6 +29,7 @@ __all__ = [
     "gnn_vae",
     "least_request_s",
     "planned_draws",
+    "plans_serve",
     "sample_model",
 ]
 
@@ -119,6 +120,12 @@ def drawn_or_planned(
     return sampled.assignment, False
 
 
+def plans_serve(ctx: SolveContext) -> bool:
+    """Whether the draws are also decoded by planning on ``ctx``: from
+    PLANNED_MIN_CONFLICTS conflicts, for the objectives plans minimise."""
+    return ctx.problem.n_conflicts >= PLANNED_MIN_CONFLICTS and ctx.objective in REINSERT_OBJECTIVES
+
+
 def planned_draws(
     ctx: SolveContext, sampled: Sampled, deadline: float
 ) -> tuple[Assignments, float] | None:
@@ -126,7 +133,7 @@ def planned_draws(
     the robot orders of PLANNED_DRAWS of ``sampled``'s draws spread along its ladder, made
     until ``deadline`` -> (answer, cost); None below PLANNED_MIN_CONFLICTS, for the
     objectives plans do not serve, or where none was made in time."""
-    if ctx.problem.n_conflicts < PLANNED_MIN_CONFLICTS or ctx.objective not in REINSERT_OBJECTIVES:
+    if not plans_serve(ctx):
         return None
     rows = np.unique(np.linspace(0, len(sampled.priorities) - 1, PLANNED_DRAWS).astype(np.int64))
     orders = [np.argsort(sampled.priorities[row], kind="stable") for row in rows]

@@ -8,13 +8,19 @@ from pathlib import Path
 
 import pytest
 
+from service.core.assignment import Assignments
 from service.core.check import check
 from service.learning.generate import stitched_problem
 from service.learning.store import load_all
 from service.solvers.fcfs import fcfs
 from service.solvers.gnn_vae import embed_fits, gnn_vae, least_request_s
-from service.solvers.refine import SAMPLES_LEAST_SHARE, gnn_vae_refined
-from service.solvers.registry import SolveContext
+from service.solvers.refine import (
+    PLANNED_SAMPLES_LEAST_SHARE,
+    SAMPLES_LEAST_SHARE,
+    gnn_vae_refined,
+)
+from service.solvers.registry import SolveContext, SolverOutput
+from service.solvers.tabu import plain_start
 from tests.solvers.common import context, cost
 
 STORE = Path(__file__).resolve().parents[2] / "model_store"
@@ -69,11 +75,17 @@ def _assert_refined_without_samples(ctx: SolveContext) -> None:
     assert check(ctx.problem, ctx.cliques, refined.assignment).ok.all()
 
 
+@pytest.mark.parametrize("planned", [False, True])
 def test_refined_samples_only_where_the_least_model_request_is_a_small_share(
-    models: dict,
+    planned: bool, models: dict, monkeypatch: pytest.MonkeyPatch
 ) -> None:
+    """A quarter of the budget; where the draws are also planned, half."""
+    from service.solvers import gnn_vae as gnn
+
+    if planned:
+        monkeypatch.setattr(gnn, "PLANNED_MIN_CONFLICTS", 0)
     least = least_request_s(_ctx(0, "avg_completion", models))
-    enough = least / SAMPLES_LEAST_SHARE
+    enough = least / (PLANNED_SAMPLES_LEAST_SHARE if planned else SAMPLES_LEAST_SHARE)
     _assert_refined_without_samples(_ctx(0, "avg_completion", models, 0.9 * enough))
     refined = gnn_vae_refined(_ctx(0, "avg_completion", models, 1.1 * enough))
     assert refined is not None and refined.samples >= 1
@@ -110,3 +122,41 @@ def test_refined_starts_from_a_plan_in_the_draws_orders_where_cheaper(
     assert out is not None and out.samples >= 1 and len(starts) == 1
     assert check(ctx.problem, ctx.cliques, out.assignment).ok.all()
     assert cost(ctx, out) <= starts[0] + 1e-9
+
+
+@pytest.mark.parametrize("seed", [5, 6])
+def test_where_plans_serve_tabu_runs_from_the_cheaper_start_alone(
+    seed: int, models: dict, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Where the draws are also planned, tabu runs once, from the cheaper of the model's
+    start and FCFS (so the answer is never dearer than either); elsewhere from both."""
+    from service.solvers import gnn_vae as gnn
+    from service.solvers import refine
+
+    searched: list[float] = []  # the cost of each start tabu ran from
+    model_starts: list[float] = []
+    real_tabu, real_start = refine.tabu_search, refine.drawn_or_planned
+
+    def tabu(ctx: SolveContext, start: Assignments, **kwargs: object) -> tuple:
+        searched.append(cost(ctx, SolverOutput(start)))
+        return real_tabu(ctx, start, **kwargs)
+
+    def model_start(ctx: SolveContext, sampled: object, deadline: float) -> tuple:
+        answer, plan = real_start(ctx, sampled, deadline)
+        model_starts.append(cost(ctx, SolverOutput(answer)))
+        return answer, plan
+
+    monkeypatch.setattr(refine, "tabu_search", tabu)
+    monkeypatch.setattr(refine, "drawn_or_planned", model_start)
+    ctx = _ctx(seed, "avg_completion", models)
+    assert gnn_vae_refined(ctx) is not None and len(searched) == 2  # not planned: both
+    searched.clear()
+    model_starts.clear()
+    monkeypatch.setattr(gnn, "PLANNED_MIN_CONFLICTS", 0)
+    out = gnn_vae_refined(ctx)
+    assert out is not None and out.samples >= 1 and "the cheaper of it and FCFS" in out.detail
+    fcfs_start = cost(ctx, SolverOutput(plain_start(ctx)))
+    assert len(searched) == 1 and len(model_starts) == 1
+    assert searched[0] == min(model_starts[0], fcfs_start)
+    assert check(ctx.problem, ctx.cliques, out.assignment).ok.all()
+    assert cost(ctx, out) <= searched[0] + 1e-9
