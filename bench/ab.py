@@ -1,4 +1,5 @@
-"""Two variants of ``auto`` side by side, interleaved run by run.
+"""Two variants of ``auto`` (or ``auto_2cores``: ``--method``) side by side, interleaved run
+by run.
 
 The 2-vCPU benchmark machines drift: measured in blocks a few minutes apart, a variant
 read 0.8171 -> 0.8615 on the 250-robot generated warehouses at 1 s, and 0.8197 -> 0.8237
@@ -136,6 +137,9 @@ class Config:
     solver_seeds: int = 2
     objective: str = "avg_completion"
     base_seed: int = 0  # the worlds' first seed; solver seeds count from 0
+    # The portfolio compared: ``auto``, or ``auto_2cores`` (both cores for one solve, as a
+    # service running one fleet is set up; ``bench.anytime.METHODS``).
+    method: str = "auto"
     store: Path = MODEL_STORE
     cache: Path = Path("bench/cache")
     references: Path | None = anytime.REFERENCES
@@ -149,7 +153,7 @@ def run(cfg: Config, progress: bool = True) -> dict[str, Any]:
         cfg.worlds, cfg.per_world, cfg.cache, cfg.base_seed, cfg.objective
     )
     policy = service_policy(cfg.store)
-    runner = anytime.Config(methods=("auto",), objective=cfg.objective, base_seed=cfg.base_seed)
+    runner = anytime.Config(methods=(cfg.method,), objective=cfg.objective, base_seed=cfg.base_seed)
     for tag in VARIANTS:  # what a variant compiles is not timed either
         with applied(variants[tag]):
             anytime.warm_up(runner, cases, policy)
@@ -161,7 +165,7 @@ def run(cfg: Config, progress: bool = True) -> dict[str, Any]:
         pair = []
         for tag in VARIANTS if k % 2 == 0 else VARIANTS[::-1]:
             with applied(variants[tag]):
-                row = anytime.run_method("auto", case, cfg.budget, runner, policy, seed)
+                row = anytime.run_method(cfg.method, case, cfg.budget, runner, policy, seed)
             pair.append({**row, "variant": tag})
         rows += measured(case, [*_known(refs, case, cfg), *pair])[-2:]
     return {"machine": machine_info(), "config": jsonable(asdict(cfg)), "rows": rows}
@@ -232,6 +236,7 @@ def _parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     p.add_argument("--solver-seeds", type=int, help="solver seeds per world (0, 1, ...)")
     p.add_argument("--objective")
     p.add_argument("--seed", type=int, dest="base_seed", help="the worlds' first seed")
+    p.add_argument("--method", choices=anytime.PORTFOLIOS, help="the portfolio compared")
     p.add_argument("--out", type=Path)
     return p.parse_args(argv)
 

@@ -79,10 +79,10 @@ class Settings(BaseSettings):
     # or corrupt model degrades its objective to the exact solver, then FCFS.
     model_store: Path = DEFAULT_MODEL_STORE
     # Cores per solve (CP-SAT's workers, threads evaluating the local searches' batches,
-    # LNS sub-problems solved at once), and how many solves run at once in worker
-    # threads; their product should not exceed the machine's cores. One fleet per service
-    # on 2 cores: concurrency 1 and 2 workers (measured in docs/benchmarks.md, "Anytime
-    # auto", auto_2cores).
+    # LNS sub-problems solved at once, re-insertion searches a turn runs at once), and how
+    # many solves run at once in worker threads; their product should not exceed the
+    # machine's cores. One fleet per service on 2 cores: concurrency 1 and 2 workers
+    # (measured in docs/benchmarks.md, "Anytime auto", auto_2cores).
     exact_workers: int = Field(default=1, ge=1)
     # The ``exact`` solver's answer the same on every run with the same seed, even when the
     # time limit cuts its search: CP-SAT stops on a deterministic-time budget (about half

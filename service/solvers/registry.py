@@ -37,7 +37,8 @@ class SolveContext:
     time_limit_s: float
     seed: int = 0
     samples: int | None = None
-    # Cores of this solve: CP-SAT's workers, the evaluator's threads, LNS sub-problems at once.
+    # Cores of this solve: CP-SAT's workers, the evaluator's threads, LNS sub-problems at once,
+    # re-insertion searches a turn runs at once.
     workers: int = 1
     models: Mapping[str, StoredModel] = field(default_factory=dict)  # by objective
     # Sees every improving solution of an anytime solver (CP-SAT) as (wall s, assignment):

@@ -98,6 +98,31 @@ def test_variants_run_back_to_back_their_order_alternating(monkeypatch, tmp_path
     assert portfolio.MID_LNS_SHARE not in (0.1, 0.2)
 
 
+def test_the_portfolio_compared_is_the_configured_one(monkeypatch) -> None:
+    """``--method auto_2cores`` runs and warms up that portfolio (both cores for a solve)."""
+
+    class FakeCase:
+        name, family, ref_cost, free = "w/0", "w", None, 1.0
+
+    methods: list[str] = []
+    warmed: list[tuple[str, ...]] = []
+    monkeypatch.setattr(ab, "world_cases", lambda *a, **k: [FakeCase()])
+    monkeypatch.setattr(ab, "service_policy", lambda store: None)
+    monkeypatch.setattr(ab.anytime, "warm_up", lambda cfg, *a: warmed.append(cfg.methods))
+    monkeypatch.setattr(ab, "request_key", lambda *a: "key")
+    monkeypatch.setattr(
+        ab.anytime, "run_method",
+        lambda method, case, budget, cfg, policy, seed=None: methods.append(method) or {
+            "name": case.name, "family": case.family, "seed": seed, "cost": 10.0,
+            "optimal": False, "free": 1.0},
+    )  # fmt: skip
+    ab.run(Config(method="auto_2cores", solver_seeds=1, references=None), progress=False)
+    assert methods == ["auto_2cores"] * 2 and warmed == [("auto_2cores",)] * 2
+    assert ab._parse_args(["--method", "auto_2cores"]).method == "auto_2cores"
+    with pytest.raises(SystemExit):
+        ab._parse_args(["--method", "exact"])
+
+
 def test_conformance_sets_come_first_measured_against_their_optima(monkeypatch) -> None:
     class FakeCase:
         def __init__(self, name: str, ref_cost: float | None) -> None:

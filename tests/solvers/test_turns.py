@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 
 import numpy as np
@@ -19,7 +20,7 @@ from service.core.check import check
 from service.solvers import turns
 from service.solvers.priority import PriorityConfig, answer_ranks, priority_search
 from service.solvers.registry import SolveContext
-from service.solvers.reinsert import reinsert_search
+from service.solvers.reinsert import ReinsertResult, reinsert_search
 from service.solvers.tabu import plain_start
 from service.solvers.turns import TurnsConfig, _next_share, take_turns
 from tests.solvers.test_reinsert import CONTEXTS, DATA, SLOW, _context
@@ -151,3 +152,58 @@ def test_priority_search_waits_until_reinsertion_is_cold(
     begin = time.monotonic()
     take_turns(ctx, start, cost, begin + 0.6, 0, replace(config, priority_while_hot=True))
     assert calls and min(calls) < begin + 0.1
+
+
+def _wh50() -> tuple[SolveContext, Assignments, float]:
+    line = (DATA / "wh_50.jsonl").read_text().splitlines()[0]
+    ctx = _context(json.loads(line)["request"], "avg_completion")
+    start = plain_start(ctx)
+    return ctx, start, float(ctx.evaluator.evaluate(start).costs["avg_completion"][0])
+
+
+@pytest.mark.parametrize(
+    ("workers", "chains", "expected"), [(1, None, 1), (2, None, 2), (2, 1, 1), (1, 3, 3)]
+)
+def test_a_turn_runs_one_reinsertion_chain_per_core_each_with_its_own_seed(
+    workers: int, chains: int | None, expected: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """One chain per core the solve has (``ctx.workers``) unless the config says how many;
+    chain 0 has the turn's seed (one chain: the single search's), the others seeds of their
+    own; the turns still return a valid answer no worse than their start."""
+    seeds: list[int] = []
+
+    def recorded(ctx, start, until, seed, **kwargs):
+        seeds.append(seed)
+        return reinsert_search(ctx, start, until, seed, **kwargs)
+
+    monkeypatch.setattr(turns, "reinsert_search", recorded)
+    ctx, start, cost = _wh50()
+    ctx = replace(ctx, workers=workers)
+    config = TurnsConfig(turn_s=0.05, cooling_share=1.0, chains=chains)
+    found = take_turns(ctx, start, cost, time.monotonic() + 0.3, 7, config)
+    assert found.cost <= cost
+    _assert_valid(ctx, found.best, found.cost)
+    assert len(seeds) == expected * found.turns
+    by_turn = [sorted(seeds[k : k + expected]) for k in range(0, len(seeds), expected)]
+    stride = turns.CHAIN_SEED_STRIDE
+    assert by_turn == [[7 + t + k * stride for k in range(expected)] for t in range(found.turns)]
+
+
+def test_a_turn_goes_on_from_its_cheapest_chain_the_first_of_equals(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Of a turn's chains the cheapest result goes on; of equals, chain 0's."""
+    ctx, start, cost = _wh50()
+    costs = {0: 5.0, turns.CHAIN_SEED_STRIDE: 3.0, 2 * turns.CHAIN_SEED_STRIDE: 3.0}
+
+    def fake(ctx, start, until, seed, **kwargs):
+        return ReinsertResult(start, costs[seed], seed)  # steps: which chain
+
+    monkeypatch.setattr(turns, "reinsert_search", fake)
+    with ThreadPoolExecutor(3) as pool:
+        found = turns._reinsertion(ctx, start, time.monotonic(), 0, (0.0, 1.0), pool, 3)
+    assert (found.cost, found.steps) == (3.0, turns.CHAIN_SEED_STRIDE)
+    costs[0] = 3.0
+    with ThreadPoolExecutor(3) as pool:
+        found = turns._reinsertion(ctx, start, time.monotonic(), 0, (0.0, 1.0), pool, 3)
+    assert found.steps == 0
