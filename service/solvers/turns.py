@@ -81,11 +81,13 @@ class TurnsConfig:
     # with a seed of its own; the cheapest goes on (None: one per core the solve has,
     # ``SolveContext.workers``). A step's kernels release the GIL, the Python between them
     # does not: two threads took 1.43-1.9x the steps of one (session 30). Measured (session
-    # 44, ``python -m bench.ab``, two chains against one, both on one solve's two cores;
-    # 1 s, generated warehouses of 100 and 250 robots, three worlds a kind, two seeds): the
-    # two-way and two-lane kinds 0.9006 / 0.8954 (15 cheaper, 9 dearer of 24), on other
-    # worlds of those and of wh_one_way and wh_mixed 250 (seeds from 1,000) 0.9800 / 0.9626
-    # (25 / 11); 5 s 0.9587 / 0.9556 (12 / 12).
+    # 44, ``python -m bench.ab``, two chains against one on one solve's two cores; 1 s,
+    # generated warehouses of 100 and 250 robots, three worlds a kind, two seeds, cost
+    # ratio): with ``--method auto_2cores`` the two-way and two-lane kinds 0.8892 / 0.8829
+    # (14 cheaper, 10 dearer of 24), other worlds of those and of wh_one_way and wh_mixed 250
+    # (seeds from 2,000) 0.9805 / 0.9688 (21 / 15); two threads forced on one worker's
+    # ``auto``: 0.9006 / 0.8954 (15 / 9), seeds from 1,000 0.9800 / 0.9626 (25 / 11); 5 s
+    # 0.9587 / 0.9556 (12 / 12).
     chains: int | None = None
 
 
