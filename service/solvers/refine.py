@@ -64,15 +64,15 @@ SAMPLES_LEAST_SHARE = 0.25
 # up. Measured (session 44, `/tmp/s44/share2.py`, not committed: ``solve_case`` of
 # ``bench.cases``, three generated warehouses a kind, seeds 0-1 interleaved, avg_completion;
 # the mean of the old rule's cost over the new one's, above 1 where the new is cheaper):
-# share 0.5 and one start against 0.25
-# and two starts, at 0.3 / 0.6 / 1 s: two-way 250 robots 0.998 / 1.481 / 1.016 (at 0.6 s
-# the samples now run: 647-687 against 947-1023), two-lane 250 1.309 / 1.026 / 1.030,
-# wh_mixed 250 1.249 / 1.183 / 1.022, two-way 100 1.007 / 1.007 / 1.007, two-lane 100
-# 1.011 / 1.004 / 1.000; share 0.5 with two starts 0.996-1.482, one start adding 0-0.03
-# everywhere but two-way 250 at 0.3 s (even). Below 1,000 conflicts (where the model's
-# start is a decoded draw) one start was worse: two-way 25 and 50 robots 0.95 and
-# 0.98-1.01, sparse floors of 50 robots 0.91, dense floors of 25 0.99: tabu ends by
-# patience there, and the second start is what the rest of the time buys.
+# share 0.5 and one start against 0.25 and two starts, at 0.3 / 0.6 / 1 s: two-way 250
+# robots 0.998 / 1.481 / 1.016 (at 0.6 s the samples now run: 647-687 against 947-1023),
+# two-lane 250 1.309 / 1.026 / 1.030, wh_mixed 250 1.249 / 1.183 / 1.022, two-way 100
+# 1.007 / 1.007 / 1.007, two-lane 100 1.011 / 1.004 / 1.000; share 0.5 with two starts
+# 0.996-1.482, one start adding 0-0.03 everywhere but two-way 250 at 0.3 s (even). Below
+# 1,000 conflicts (where the model's start is a decoded draw) one start was worse: two-way
+# 25 and 50 robots 0.95 and 0.98-1.01, sparse floors of 50 robots 0.91, dense floors of 25
+# 0.99: tabu ends by patience there, and the second start is what the rest of the time
+# buys.
 PLANNED_SAMPLES_LEAST_SHARE = 0.5
 
 

@@ -108,8 +108,10 @@ def take_turns(
     config: TurnsConfig | None = None,
 ) -> TurnsResult:
     """Re-insertion then priority search, in turns from the valid ``start`` (of ``cost``)
-    until ``deadline`` (monotonic); each turn's searches get the next seed. ``config``
-    None: TurnsConfig's defaults, read at the call (so that ``bench.ab`` can vary them)."""
+    until ``deadline`` (monotonic); each turn's searches get the next seed, and its
+    re-insertion runs in ``config.chains`` threads (one per core of the solve by default).
+    ``config`` None: TurnsConfig's defaults, read at the call (so that ``bench.ab`` can
+    vary them)."""
     config = TurnsConfig() if config is None else config
     best, turns, share = start, 0, config.priority_share
     now = time.monotonic()
