@@ -1,8 +1,8 @@
 """The GNN-VAE refined by local search: the published "Ours*".
 
-``gnn_vae_refined`` decodes the GNN-VAE's samples, takes the cheapest (from
-1,000 conflicts, or a plan in the draws' orders where cheaper: see
-:func:`~service.solvers.gnn_vae.drawn_or_planned`), and
+``gnn_vae_refined`` decodes the GNN-VAE's samples, takes the cheapest (or, where
+cheaper, its directions with types by descent below 1,000 conflicts, a plan in the draws'
+orders from there: see :func:`~service.solvers.gnn_vae.model_answer`), and
 runs tabu search (:mod:`service.solvers.tabu`) from it and from FCFS (or the
 warm start of a re-schedule, if cheaper), each
 with half of what is left of a 1 s budget (or of the request's time limit, if
@@ -32,8 +32,8 @@ import numpy as np
 from service.core.assignment import Assignments
 from service.solvers.gnn_vae import (
     DEFAULT_SAMPLES,
-    drawn_or_planned,
     embed_fits,
+    model_answer,
     plans_serve,
     sample_model,
 )
@@ -99,7 +99,7 @@ def gnn_vae_refined(ctx: SolveContext) -> SolverOutput | None:
     if embed_fits(ctx, (PLANNED_SAMPLES_LEAST_SHARE if planned else SAMPLES_LEAST_SHARE) * budget):
         half = time.monotonic() + budget / 2
         sampled = sample_model(ctx, stored, samples, half)
-        starts.insert(0, drawn_or_planned(ctx, sampled, half)[0])
+        starts.insert(0, model_answer(ctx, sampled, half)[0])
     if planned:
         starts = [min(starts, key=lambda start: _cost(ctx, start))]  # the first of equals
     best, best_cost, iterations = starts[0], np.inf, 0

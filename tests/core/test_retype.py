@@ -1,7 +1,10 @@
-"""Types refitted to an assignment's directions: valid, never dearer, directions kept."""
+"""Types refitted to an assignment's directions: valid, never dearer, directions kept; types
+by descent: valid, directions kept, a local optimum of single type flips."""
 
 from __future__ import annotations
 
+import time
+from dataclasses import replace
 from functools import cache
 
 import numpy as np
@@ -14,8 +17,10 @@ from service.core.check import check
 from service.core.cliques import Cliques, find_cliques
 from service.core.decode import Decoder
 from service.core.evaluate import Evaluator
+from service.core.incremental import apply_moves
+from service.core.orientation import OrientationGraph
 from service.core.problem import Problem, problem_from_request
-from service.core.retype import refit_types, updated_pair_times
+from service.core.retype import descend_types, refit_types, updated_pair_times
 from service.core.schemas import OBJECTIVES, ScheduleRequest
 from service.learning.generate import stitched_problem
 from service.solvers.fcfs import fcfs_priorities
@@ -94,3 +99,71 @@ def test_updated_pair_times_are_the_schedules_least_times_at_the_pair_points(dra
     rows = np.arange(problem.n_conflicts)
     released = np.where(start.following[0], enter[rows, first], exit_[rows, first])  # (M,)
     assert np.all(enter[rows, 1 - first] >= released - 1e-6)
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    seed=st.integers(0, 40),
+    draw=st.integers(0, 10_000),
+    objective=st.sampled_from(OBJECTIVES),
+    n_realized=st.integers(0, 3),
+)
+def test_types_by_descent_are_valid_and_no_single_flip_is_cheaper(
+    seed: int, draw: int, objective: str, n_realized: int
+) -> None:
+    """From every conflict exclusive (realized types kept), the descent ends valid, with the
+    start's directions, at a cost the evaluator confirms, where no feasible type flip is
+    cheaper (checked by full evaluation of every one)."""
+    problem, cliques, decoder, evaluator = _setup(seed)
+    start = _random_start(decoder, problem, draw)
+    if n_realized:  # some conflicts' types realized (fixed) as the start has them
+        fixed = np.full(problem.n_conflicts, -1, dtype=np.int8)
+        rng = np.random.default_rng(draw)
+        chosen = rng.choice(problem.n_conflicts, n_realized, replace=False)
+        fixed[chosen] = start.following[0, chosen]
+        problem = replace(problem, fixed_type=fixed)
+    orientation = OrientationGraph(problem, cliques)
+    found, cost, flips = descend_types(
+        orientation, evaluator, objective, start.a_first, time.monotonic() + 60.0
+    )
+    assert check(problem, cliques, found).ok.tolist() == [True]
+    assert np.array_equal(found.a_first, start.a_first)
+    realized_types = problem.fixed_type >= 0  # (M,)
+    assert np.array_equal(
+        found.following[0][realized_types], problem.fixed_type[realized_types] == 1
+    )
+    assert cost == float(evaluator.evaluate(found).costs[objective][0])
+    flips_all = problem.n_conflicts + np.arange(problem.n_conflicts)
+    feasible = flips_all[orientation.feasible(found.a_first[0], found.following[0], flips_all)]
+    if feasible.size:
+        neighbours = evaluator.evaluate(apply_moves(found, feasible)).costs[objective]
+        assert neighbours.min() >= cost - 1e-9 * max(1.0, abs(cost))
+    exclusive = Assignments(start.a_first, (problem.fixed_type == 1)[None])
+    exclusive_cost = float(evaluator.evaluate(exclusive).costs[objective][0])
+    assert cost <= exclusive_cost and (flips == 0) == (cost == exclusive_cost)
+
+
+def test_types_by_descent_leave_the_refit_types_local_optimum() -> None:
+    """On a congested two-way warehouse the descent from exclusive, on FCFS's directions,
+    goes below the types refitted by spared waits (the decoder's), which no single flip
+    improves."""
+    problem, decoder, evaluator = _warehouse()
+    ranks, scores = fcfs_priorities(problem)
+    start = decoder.decode_ranks(ranks[None], scores[None])
+    refit = refit_types(decoder, evaluator, "avg_completion", start)[1]
+    orientation = OrientationGraph(problem, decoder.cliques)
+    _, cost, flips = descend_types(
+        orientation, evaluator, "avg_completion", start.a_first, time.monotonic() + 60.0
+    )
+    assert flips > 0 and cost < refit - 1e-6
+
+
+def test_types_by_descent_stop_at_the_deadline() -> None:
+    problem, decoder, evaluator = _warehouse()
+    ranks, scores = fcfs_priorities(problem)
+    start = decoder.decode_ranks(ranks[None], scores[None])
+    orientation = OrientationGraph(problem, decoder.cliques)
+    found, cost, flips = descend_types(
+        orientation, evaluator, "avg_completion", start.a_first, time.monotonic() - 1.0
+    )
+    assert flips == 0 and not found.following[0][problem.fixed_type < 0].any()

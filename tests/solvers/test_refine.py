@@ -111,12 +111,12 @@ def test_refined_starts_from_a_plan_in_the_draws_orders_where_cheaper(
     starts: list[float] = []
 
     def spied(ctx: SolveContext, sampled: object, deadline: float) -> tuple:
-        answer, plan = gnn.drawn_or_planned(ctx, sampled, deadline)
+        answer, replaced = gnn.model_answer(ctx, sampled, deadline)
         starts.append(float(ctx.evaluator.evaluate(answer).costs[ctx.objective][0]))
         assert starts[-1] <= sampled.cost
-        return answer, plan
+        return answer, replaced
 
-    monkeypatch.setattr(refine, "drawn_or_planned", spied)
+    monkeypatch.setattr(refine, "model_answer", spied)
     ctx = _ctx(5, "avg_completion", models)
     out = gnn_vae_refined(ctx)
     assert out is not None and out.samples >= 1 and len(starts) == 1
@@ -135,19 +135,19 @@ def test_where_plans_serve_tabu_runs_from_the_cheaper_start_alone(
 
     searched: list[float] = []  # the cost of each start tabu ran from
     model_starts: list[float] = []
-    real_tabu, real_start = refine.tabu_search, refine.drawn_or_planned
+    real_tabu, real_start = refine.tabu_search, refine.model_answer
 
     def tabu(ctx: SolveContext, start: Assignments, **kwargs: object) -> tuple:
         searched.append(cost(ctx, SolverOutput(start)))
         return real_tabu(ctx, start, **kwargs)
 
     def model_start(ctx: SolveContext, sampled: object, deadline: float) -> tuple:
-        answer, plan = real_start(ctx, sampled, deadline)
+        answer, replaced = real_start(ctx, sampled, deadline)
         model_starts.append(cost(ctx, SolverOutput(answer)))
-        return answer, plan
+        return answer, replaced
 
     monkeypatch.setattr(refine, "tabu_search", tabu)
-    monkeypatch.setattr(refine, "drawn_or_planned", model_start)
+    monkeypatch.setattr(refine, "model_answer", model_start)
     ctx = _ctx(seed, "avg_completion", models)
     assert gnn_vae_refined(ctx) is not None and len(searched) == 2  # not planned: both
     searched.clear()
