@@ -101,10 +101,14 @@ def descend_types(
     evaluation = evaluator.evaluate(answer)
     cost = float(evaluation.costs[objective][0])
     may = (problem.fixed_type < 0) & ~orientation.cliques.forbidden()  # (M,)
-    flips = n_conflicts + np.flatnonzero(may)  # (K,) type-flip moves
     best_move = IncrementalEvaluator(evaluator).best_move
     made = 0
-    while flips.size and time.monotonic() < deadline:
+    while time.monotonic() < deadline:
+        # Only a following-type conflict, or an exclusive one whose wait binds, can lower
+        # the cost by a flip: following-type relaxes the wait and adds an exit order, so
+        # it changes nothing where the wait does not bind, or adds a wait.
+        useful = may & (answer.following[0] | evaluator.binding(answer, evaluation))  # (M,)
+        flips = n_conflicts + np.flatnonzero(useful)  # (K,) type-flip moves
         moves = flips[orientation.feasible(answer.a_first[0], answer.following[0], flips)]
         tabu = np.zeros(moves.size, dtype=bool)  # (K',) none: plain descent
         picked = best_move(answer, evaluation, moves, objective, tabu, cost) if moves.size else None
