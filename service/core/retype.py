@@ -19,7 +19,7 @@ fill by spared wait stops in poor local optima where following-type couples robo
 (a second robot that follows must also leave after the first): given the directions of a
 5-s ``auto`` answer of a two-way warehouse of 100 robots, the refit types cost 2.0x that
 answer and no single flip improved them, where the descent from exclusive reached 1.05x
-in 55 flips (docs/benchmarks.md, session 44).
+in 55 flips (docs/benchmarks.md, session 44). A round takes up to FLIPS_PER_ROUND flips.
 """
 
 from __future__ import annotations
@@ -35,11 +35,16 @@ from service.core.incremental import IncrementalEvaluator, apply_moves
 from service.core.orientation import OrientationGraph
 from service.core.schemas import Objective
 
-__all__ = ["REFIT_ROUNDS", "descend_types", "refit_types", "updated_pair_times"]
+__all__ = ["FLIPS_PER_ROUND", "REFIT_ROUNDS", "descend_types", "refit_types", "updated_pair_times"]
 
 # Rounds at updated times after the one at planned times (each stops the refit when it
 # is not cheaper); the third still improved on some 250-robot worlds.
 REFIT_ROUNDS = 3
+# Flips a round of descend_types may take together. Measured (session 44,
+# `/tmp/s44/batch.py`, not committed; the best draw's directions of six held-out generated
+# warehouses of 50 robots, 820-1,020 conflicts): one flip a round 120-236 ms; 4 49-141 ms
+# and costs within 0.4 % either way; 8 44-69 ms, 0-4 % dearer; 16 26-54 ms, 1-5 % dearer.
+FLIPS_PER_ROUND = 8
 
 
 def updated_pair_times(
@@ -88,36 +93,57 @@ def descend_types(
     a_first: np.ndarray,
     deadline: float,
 ) -> tuple[Assignments, float, int]:
-    """Types for the valid directions ``a_first`` (1, M) by best-improvement descent: from
-    every conflict exclusive (realized ones following), the cheapest single type flip that
-    keeps the answer valid (:meth:`~service.core.orientation.OrientationGraph.feasible`:
-    never a realized type, never past a clique's budget), as long as one is cheaper, until
-    ``deadline`` (monotonic) -> (the answer, its cost, flips made). Flips are costed
-    incrementally (:class:`~service.core.incremental.IncrementalEvaluator`, the one
-    evaluator's numbers); the answer is valid whenever the directions are."""
+    """Types for the valid directions ``a_first`` (1, M) by descent over single type
+    flips, from every conflict exclusive (realized ones following), until no flip that
+    keeps the answer valid is cheaper
+    (:meth:`~service.core.orientation.OrientationGraph.feasible`: never a realized type,
+    never past a clique's budget) or ``deadline`` (monotonic) passes -> (the answer, its
+    cost, rounds). A round costs every flip incrementally
+    (:class:`~service.core.incremental.IncrementalEvaluator`: the one evaluator's numbers)
+    and takes the cheapest alone or, where cheaper still, with up to FLIPS_PER_ROUND - 1
+    more of the cheaper ones in order of their own cost (each still valid on top of those
+    before). The answer is valid whenever the directions are."""
     problem = orientation.problem
-    n_conflicts = problem.n_conflicts
     answer = Assignments(a_first, (problem.fixed_type == 1)[None])  # (1, M) each
     evaluation = evaluator.evaluate(answer)
     cost = float(evaluation.costs[objective][0])
     may = (problem.fixed_type < 0) & ~orientation.cliques.forbidden()  # (M,)
-    best_move = IncrementalEvaluator(evaluator).best_move
-    made = 0
+    incremental = IncrementalEvaluator(evaluator)
+    rounds = 0
     while time.monotonic() < deadline:
-        # Only a following-type conflict, or an exclusive one whose wait binds, can lower
-        # the cost by a flip: following-type relaxes the wait and adds an exit order, so
-        # it changes nothing where the wait does not bind, or adds a wait.
-        useful = may & (answer.following[0] | evaluator.binding(answer, evaluation))  # (M,)
-        flips = n_conflicts + np.flatnonzero(useful)  # (K,) type-flip moves
-        moves = flips[orientation.feasible(answer.a_first[0], answer.following[0], flips)]
-        tabu = np.zeros(moves.size, dtype=bool)  # (K',) none: plain descent
-        picked = best_move(answer, evaluation, moves, objective, tabu, cost) if moves.size else None
-        if picked is None or not picked[1] < cost:
+        moves = _type_flips(orientation, evaluator, answer, evaluation, may)  # (K,)
+        costs = incremental.costs(answer, evaluation, moves)[objective]  # (K,)
+        order = np.argsort(costs, kind="stable")
+        cheaper = moves[order[costs[order] < cost][:FLIPS_PER_ROUND]]  # (<= FLIPS_PER_ROUND,)
+        if not cheaper.size:
             break
-        flipped = apply_moves(answer, moves[picked[0] : picked[0] + 1])
-        found = evaluator.evaluate(flipped)
-        if not float(found.costs[objective][0]) < cost:  # cheaper only by rounding: done
+        best = apply_moves(answer, cheaper[:1])
+        combined = best
+        for move in cheaper[1:]:
+            if orientation.feasible(combined.a_first[0], combined.following[0], move[None])[0]:
+                combined = apply_moves(combined, move[None])
+        found = min(
+            ((evaluator.evaluate(taken), taken) for taken in (best, combined)),
+            key=lambda pair: float(pair[0].costs[objective][0]),
+        )  # the best alone on ties
+        if not float(found[0].costs[objective][0]) < cost:  # cheaper only by rounding: done
             break
-        answer, evaluation, made = flipped, found, made + 1
+        evaluation, answer, rounds = found[0], found[1], rounds + 1
         cost = float(evaluation.costs[objective][0])
-    return answer, cost, made
+    return answer, cost, rounds
+
+
+def _type_flips(
+    orientation: OrientationGraph,
+    evaluator: Evaluator,
+    answer: Assignments,
+    evaluation: Evaluation,
+    may: np.ndarray,
+) -> np.ndarray:
+    """The type flips (moves M + m) of ``answer`` that keep it valid and may lower its
+    cost: of a conflict whose type ``may`` (M,) change, following-type, or exclusive with a
+    wait that binds. Following-type relaxes the wait and adds an exit order, so elsewhere
+    it changes nothing, or adds a wait."""
+    useful = may & (answer.following[0] | evaluator.binding(answer, evaluation))  # (M,)
+    flips = orientation.problem.n_conflicts + np.flatnonzero(useful)  # (K,)
+    return flips[orientation.feasible(answer.a_first[0], answer.following[0], flips)]

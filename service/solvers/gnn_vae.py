@@ -112,7 +112,7 @@ def gnn_vae(ctx: SolveContext) -> SolverOutput | None:
         notes.append(f"time limit reached after {best.samples} of {samples} samples")
     answer, replaced = model_answer(ctx, best, deadline)
     if replaced is not None:
-        notes.append(f"{replaced} was cheaper than the decoded draws")
+        notes.append(f"answered by {replaced}: cheaper than the decoded draws")
     return SolverOutput(
         answer,
         optimal=False,
