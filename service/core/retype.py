@@ -122,8 +122,9 @@ def descend_types(
         for move in cheaper[1:]:
             if orientation.feasible(combined.a_first[0], combined.following[0], move[None])[0]:
                 combined = apply_moves(combined, move[None])
+        taken = (best,) if combined is best else (best, combined)
         found = min(
-            ((evaluator.evaluate(taken), taken) for taken in (best, combined)),
+            ((evaluator.evaluate(option), option) for option in taken),
             key=lambda pair: float(pair[0].costs[objective][0]),
         )  # the best alone on ties
         if not float(found[0].costs[objective][0]) < cost:  # cheaper only by rounding: done
