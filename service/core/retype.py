@@ -45,6 +45,8 @@ REFIT_ROUNDS = 3
 # warehouses of 50 robots, 820-1,020 conflicts): one flip a round 120-236 ms; 4 49-141 ms
 # and costs within 0.4 % either way; 8 44-69 ms, 0-4 % dearer; 16 26-54 ms, 1-5 % dearer.
 FLIPS_PER_ROUND = 8
+# Flips costed between two looks at the deadline in a round of descend_types.
+COSTED_PER_CHECK = 64
 
 
 def updated_pair_times(
@@ -112,7 +114,9 @@ def descend_types(
     rounds = 0
     while time.monotonic() < deadline:
         moves = _type_flips(orientation, evaluator, answer, evaluation, may)  # (K,)
-        costs = incremental.costs(answer, evaluation, moves)[objective]  # (K,)
+        costs = _flip_costs(incremental, answer, evaluation, moves, objective, deadline)
+        if costs is None:  # the deadline passed during the round
+            break
         order = np.argsort(costs, kind="stable")
         cheaper = moves[order[costs[order] < cost][:FLIPS_PER_ROUND]]  # (<= FLIPS_PER_ROUND,)
         if not cheaper.size:
@@ -132,6 +136,26 @@ def descend_types(
         evaluation, answer, rounds = found[0], found[1], rounds + 1
         cost = float(evaluation.costs[objective][0])
     return answer, cost, rounds
+
+
+def _flip_costs(
+    incremental: IncrementalEvaluator,
+    answer: Assignments,
+    evaluation: Evaluation,
+    moves: np.ndarray,
+    objective: Objective,
+    deadline: float,
+) -> np.ndarray | None:
+    """Each of ``moves``' (K,) cost (K,), in chunks of COSTED_PER_CHECK with the
+    ``deadline`` (monotonic) checked between them (None: it passed): a move can propagate
+    through every event, so a whole round of a large graph could run far past it."""
+    costs = []
+    for lo in range(0, moves.size, COSTED_PER_CHECK):
+        if lo and time.monotonic() >= deadline:
+            return None
+        chunk = moves[lo : lo + COSTED_PER_CHECK]
+        costs.append(incremental.costs(answer, evaluation, chunk)[objective])
+    return np.concatenate(costs) if costs else np.empty(0)
 
 
 def _type_flips(

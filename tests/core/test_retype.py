@@ -12,6 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from service.core import retype
 from service.core.assignment import Assignments
 from service.core.check import check
 from service.core.cliques import Cliques, find_cliques
@@ -167,3 +168,27 @@ def test_types_by_descent_stop_at_the_deadline() -> None:
         orientation, evaluator, "avg_completion", start.a_first, time.monotonic() - 1.0
     )
     assert flips == 0 and not found.following[0][problem.fixed_type < 0].any()
+
+
+def test_types_by_descent_stop_within_a_round_once_the_deadline_passes(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The flips of a round are costed in chunks with the deadline checked between them:
+    a clock past it after the round's first chunk ends the descent there, at its start."""
+    problem, decoder, evaluator = _warehouse()
+    ranks, scores = fcfs_priorities(problem)
+    start = decoder.decode_ranks(ranks[None], scores[None])
+    orientation = OrientationGraph(problem, decoder.cliques)
+    readings = iter([0.0])  # the first look (the round starts), then past the deadline
+
+    class Clock:
+        @staticmethod
+        def monotonic() -> float:
+            return next(readings, 10.0)
+
+    monkeypatch.setattr(retype, "COSTED_PER_CHECK", 1)
+    monkeypatch.setattr(retype, "time", Clock)
+    found, cost, rounds = descend_types(
+        orientation, evaluator, "avg_completion", start.a_first, 5.0
+    )
+    assert rounds == 0 and not found.following[0][problem.fixed_type < 0].any()
