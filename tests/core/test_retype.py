@@ -42,13 +42,16 @@ def _random_start(decoder: Decoder, problem: Problem, seed: int) -> Assignments:
     return decoder.decode(bids, rng.uniform(size=(1, problem.n_conflicts)))
 
 
+# A stitched problem (seed), a random valid start on it (draw) and an objective.
+STARTS = {
+    "seed": st.integers(0, 40),
+    "draw": st.integers(0, 10_000),
+    "objective": st.sampled_from(OBJECTIVES),
+}
+
+
 @settings(max_examples=30, deadline=None)
-@given(
-    seed=st.integers(0, 40),
-    draw=st.integers(0, 10_000),
-    objective=st.sampled_from(OBJECTIVES),
-    rounds=st.integers(0, 4),
-)
+@given(**STARTS, rounds=st.integers(0, 4))
 def test_refitted_types_keep_the_directions_and_never_cost_more(
     seed: int, draw: int, objective: str, rounds: int
 ) -> None:
@@ -103,12 +106,7 @@ def test_updated_pair_times_are_the_schedules_least_times_at_the_pair_points(dra
 
 
 @settings(max_examples=30, deadline=None)
-@given(
-    seed=st.integers(0, 40),
-    draw=st.integers(0, 10_000),
-    objective=st.sampled_from(OBJECTIVES),
-    n_realized=st.integers(0, 3),
-)
+@given(**STARTS, n_realized=st.integers(0, 3))
 def test_types_by_descent_are_valid_and_no_single_flip_is_cheaper(
     seed: int, draw: int, objective: str, n_realized: int
 ) -> None:
