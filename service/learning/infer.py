@@ -74,13 +74,15 @@ BID_NOISE = 0.5
 @dataclass(frozen=True)
 class Sampled:
     """The cheapest decoded sample, types refitted (a batch of one), its cost, how many
-    were decoded, and each decoded draw's bids of the robots' first nodes: the robots'
-    priorities in that draw (a robot's first node's rank is its bid)."""
+    were decoded, each decoded draw's bids of the robots' first nodes (the robots'
+    priorities in that draw: a robot's first node's rank is its bid), and the directions
+    of the REFIT_TOP cheapest draws, cheapest first (the ones whose types were refitted)."""
 
     assignment: Assignments
     cost: float
     samples: int
     priorities: np.ndarray  # (samples, R) float > 0, lower: the robot passes first
+    top_directions: np.ndarray  # (T, M) bool, T <= REFIT_TOP
 
 
 def chunk_rows(problem: Problem, hidden: int) -> int:
@@ -229,7 +231,8 @@ def sample_best(
         bids, probs = chunks.send(fit)
     refitted = [refit_types(decoder, evaluator, objective, draw) for _, _, draw in best]
     found, cost = min(refitted, key=lambda pair: pair[1])  # first of equals: the cheaper draw
-    return Sampled(found, cost, decoded, np.concatenate(priorities))
+    top = np.concatenate([draw.a_first for _, _, draw in best])  # (T, M)
+    return Sampled(found, cost, decoded, np.concatenate(priorities), top)
 
 
 def _unchunked_row(row: int, lo: int, n: int, samples: int) -> int:

@@ -25,6 +25,7 @@ __all__ = [
     "EMBED_S_PER_EDGE",
     "PLANNED_DRAWS",
     "PLANNED_MIN_CONFLICTS",
+    "descended_draws",
     "embed_fits",
     "gnn_vae",
     "least_request_s",
@@ -63,13 +64,16 @@ EMBED_S_PER_EDGE = 4e-6
 # measured so); avg_completion and avg_delay only, the sums plans minimise.
 PLANNED_MIN_CONFLICTS = 1_000
 PLANNED_DRAWS = 4
-# Below PLANNED_MIN_CONFLICTS conflicts (every objective) the best draw's directions also
-# get the types a descent from all-exclusive reaches (``retype.descend_types``, until the
-# time limit), which answer where cheaper: the decoder's types, refitted by the waits
-# following spares, sit in local optima no single flip leaves. Measured (session 44,
-# `/tmp/s44/mtypes2.py`, not committed; avg_completion v14, the best of 100 draws, seed 0;
-# cost of the draw over the answer's): generated warehouses of 25 robots (130-300
-# conflicts) one-way 1.14-1.48 (27-44 ms), two-way 1.04-1.19, wh_mixed 1.00-1.04,
+# Below PLANNED_MIN_CONFLICTS conflicts (every objective) the cheapest draws' directions
+# (infer.REFIT_TOP of them) also get the types a descent from all-exclusive reaches
+# (``retype.descend_types``, until the time limit), the cheapest answering where cheaper
+# than the best draw: the decoder's types, refitted by the waits following spares, sit in
+# local optima no single flip leaves. The four draws' descents against the best draw's
+# alone (`/tmp/s44/topk.py`, held-out seeds of 25-50-robot warehouses, 15 worlds): 1.027x
+# cheaper on average, up to 1.17x, 7-190 ms for all four. The best draw's alone
+# (session 44, `/tmp/s44/mtypes2.py`, not committed; avg_completion v14, the best of 100
+# draws, seed 0; cost of the draw over the answer's): generated warehouses of 25 robots
+# (130-300 conflicts) one-way 1.14-1.48 (27-44 ms), two-way 1.04-1.19, wh_mixed 1.00-1.04,
 # wh_parked 1.00-1.03, two-lane 1.00; of 50 robots two-way 1.08-1.20 (800-900 conflicts,
 # 29-71 ms), one-way 1.29-1.48 (1,000-1,030, 160-409 ms); floors and the conformance sets
 # (wh_25, wh_50, geo_dense_25, geo_10) 1.000-1.002 in 0-5 ms. From PLANNED_MIN_CONFLICTS
@@ -126,21 +130,41 @@ def model_answer(
     ctx: SolveContext, sampled: Sampled, deadline: float
 ) -> tuple[Assignments, str | None]:
     """``sampled``'s best decoded draw, or what is cheaper, made until ``deadline``: below
-    PLANNED_MIN_CONFLICTS conflicts its directions with the types a descent from
-    all-exclusive reaches (``retype.descend_types``), from there the cheapest plan in its
-    draws' robot orders (:func:`planned_draws`) -> (answer, what replaced the draw, or
-    None)."""
+    PLANNED_MIN_CONFLICTS conflicts the cheapest draws' directions with the types a
+    descent from all-exclusive reaches (:func:`descended_draws`), from there the cheapest
+    plan in its draws' robot orders (:func:`planned_draws`) -> (answer, what replaced the
+    draw, or None)."""
     if ctx.problem.n_conflicts < PLANNED_MIN_CONFLICTS:
-        descended = descend_types(
-            ctx.orientation, ctx.evaluator, ctx.objective, sampled.assignment.a_first, deadline
-        )
-        if descended[1] < sampled.cost:
-            return descended[0], "the best draw's directions with types by descent"
+        descended = descended_draws(ctx, sampled, deadline)
+        if descended is not None and descended[1] < sampled.cost:
+            return descended[0], "a cheap draw's directions with types by descent"
         return sampled.assignment, None
     planned = planned_draws(ctx, sampled, deadline)
     if planned is not None and planned[1] < sampled.cost:
         return planned[0], "a plan in a draw's robot order"
     return sampled.assignment, None
+
+
+def descended_draws(
+    ctx: SolveContext, sampled: Sampled, deadline: float
+) -> tuple[Assignments, float] | None:
+    """The cheapest of the types by descent (``retype.descend_types``) on the directions
+    of ``sampled``'s cheapest draws (each distinct once, cheapest first), made until
+    ``deadline`` -> (answer, cost); None where none was started in time."""
+    found: tuple[Assignments, float] | None = None
+    seen: list[np.ndarray] = []
+    for directions in sampled.top_directions:  # (M,) each
+        if time.monotonic() >= deadline:
+            break
+        if any(np.array_equal(directions, done) for done in seen):
+            continue
+        seen.append(directions)
+        answer, cost, _ = descend_types(
+            ctx.orientation, ctx.evaluator, ctx.objective, directions[None], deadline
+        )
+        if found is None or cost < found[1]:
+            found = (answer, cost)
+    return found
 
 
 def plans_serve(ctx: SolveContext) -> bool:

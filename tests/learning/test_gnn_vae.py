@@ -175,7 +175,8 @@ def test_the_best_sample_gets_the_types_its_directions_gain_most_from(
 ) -> None:
     """sample_best answers the cheapest of the REFIT_TOP cheapest decoded draws with their
     types refitted (refit_types; ties to the cheaper draw, then the lower row), valid,
-    its cost the evaluator's, and the same in chunks of 3 draws as in one batch."""
+    its cost the evaluator's, and the same in chunks of 3 draws as in one batch; it names
+    those draws' directions, cheapest first."""
     problem, cliques = _problem(stitched_problem(seed, 30, 4.0))
     decoder, evaluator = Decoder(problem, cliques), Evaluator(problem)
     torch.manual_seed(seed)
@@ -194,6 +195,7 @@ def test_the_best_sample_gets_the_types_its_directions_gain_most_from(
         assert np.array_equal(found.assignment.a_first, expect.a_first)
         assert np.array_equal(found.assignment.following, expect.following)
         assert found.cost == pytest.approx(expect_cost, rel=1e-12)
+        assert np.array_equal(found.top_directions, candidates.a_first[top])
     assert best.cost <= refits[0][1] + 1e-9 and refits[0][1] <= costs.min() * (1 + 1e-12) + 1e-9
     assert check(problem, cliques, best.assignment).ok.all()
 
