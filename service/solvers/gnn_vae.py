@@ -61,7 +61,8 @@ EMBED_S_PER_EDGE = 4e-6
 # 4 plans in the model's orders cost 0.90-0.96 of the best of 4 in the orders ``auto``
 # starts from (shortest route, earliest finish, two random; on the trained kinds
 # 0.96-1.06). Below, the decoded draws stand (issue 3's small-problem figures were
-# measured so); avg_completion and avg_delay only, the sums plans minimise.
+# measured so), or their types by descent (next); avg_completion and avg_delay only, the
+# sums plans minimise.
 PLANNED_MIN_CONFLICTS = 1_000
 PLANNED_DRAWS = 4
 # Below PLANNED_MIN_CONFLICTS conflicts (every objective) the cheapest draws' directions
@@ -101,7 +102,7 @@ def gnn_vae(ctx: SolveContext) -> SolverOutput | None:
     Samples are decoded in memory-bounded chunks; once the time limit has passed no
     further chunk starts, and the answer says how many samples it is the best of. A
     graph whose least model request (:func:`embed_fits`) would outlast the time limit
-    gets no answer (None). Below PLANNED_MIN_CONFLICTS conflicts the best draw's
+    gets no answer (None). Below PLANNED_MIN_CONFLICTS conflicts the cheapest draws'
     directions with types by descent, from there a plan in a draw's robot order, answer
     where cheaper (:func:`model_answer`, within the time limit).
     """
