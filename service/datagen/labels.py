@@ -63,10 +63,6 @@ def _target(assignment: Assignments, cost: float, optimal: bool) -> Target:
     }
 
 
-def _cost(ctx: SolveContext, assignment: Assignments) -> float:
-    return float(ctx.evaluator.evaluate(assignment).costs[ctx.objective][0])
-
-
 def contexts(
     problem: Problem, objectives: Sequence[Objective], time_limit_s: float
 ) -> dict[Objective, SolveContext]:
@@ -82,7 +78,7 @@ def contexts(
 def top_labels(ctx: SolveContext, top: int) -> list[Target]:
     """CP-SAT's top-``top`` assignments, unhinted (the published labels)."""
     found = top_assignments(ctx.problem, ctx.cliques, ctx.objective, top, ctx.time_limit_s)
-    return [_target(r.assignment, _cost(ctx, r.assignment), r.optimal) for r in found]
+    return [_target(r.assignment, ctx.cost(r.assignment), r.optimal) for r in found]
 
 
 def portfolio_hint(ctx: SolveContext) -> Assignments:
@@ -101,9 +97,9 @@ def portfolio_labels(ctx: SolveContext, top: int) -> list[Target]:
     found = top_assignments(
         ctx.problem, ctx.cliques, ctx.objective, top, ctx.time_limit_s, hint=hint
     )
-    targets = [_with_gap(r, _cost(ctx, r.assignment)) for r in found]
+    targets = [_with_gap(r, ctx.cost(r.assignment)) for r in found]
     if not (found and found[0].optimal):
-        hint_cost = _cost(ctx, hint)
+        hint_cost = ctx.cost(hint)
         if not targets or hint_cost < targets[0]["cost"]:
             gap = targets[0]["gap"] if targets else None  # bounds the hint's gap from above
             targets = [{**_target(hint, hint_cost, False), "gap": gap}]

@@ -317,13 +317,13 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
         best, cost, stages = SolverOutput(planned[0]), planned[1], ["planned"]
     else:
         best, stages = SolverOutput(plain_start(ctx)), ["start"]
-        cost = _cost(ctx, best.assignment)
+        cost = ctx.cost(best.assignment)
     if problem.n_conflicts > ctx.exact_max_conflicts and not plans:
         first = "tabu" if ctx.warm is not None else ctx.first_stage
         left = deadline - time.monotonic()
         shared = uses_lns or (1 - FIRST_STAGE_SHARE) * left > exact_min_s  # a stage follows
         found = get_solver(first)(_with_time(ctx, FIRST_STAGE_SHARE * left if shared else left))
-        found_cost = np.inf if found is None else _cost(ctx, found.assignment)
+        found_cost = np.inf if found is None else ctx.cost(found.assignment)
         if found is not None and found_cost <= cost:
             best, cost = found, found_cost
             stages.append(first)
@@ -426,10 +426,6 @@ def _with_time(ctx: SolveContext, time_limit_s: float) -> SolveContext:
     out = copy.copy(ctx)  # the cached properties live in __dict__ and are shared
     out.time_limit_s = max(time_limit_s, 0.0)
     return out
-
-
-def _cost(ctx: SolveContext, assignment: Assignments) -> float:
-    return float(ctx.evaluator.evaluate(assignment).costs[ctx.objective][0])
 
 
 def _detail(stages: list[str], verdict: str) -> str:

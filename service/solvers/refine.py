@@ -29,7 +29,6 @@ import time
 
 import numpy as np
 
-from service.core.assignment import Assignments
 from service.solvers.gnn_vae import (
     DEFAULT_SAMPLES,
     embed_fits,
@@ -101,7 +100,7 @@ def gnn_vae_refined(ctx: SolveContext) -> SolverOutput | None:
         sampled = sample_model(ctx, stored, samples, half)
         starts.insert(0, model_answer(ctx, sampled, half)[0])
     if planned:
-        starts = [min(starts, key=lambda start: _cost(ctx, start))]  # the first of equals
+        starts = [min(starts, key=lambda start: ctx.cost(start))]  # the first of equals
     best, best_cost, iterations = starts[0], np.inf, 0
     for k, tabu_start in enumerate(starts):
         left = (budget - (time.perf_counter() - start)) / (len(starts) - k)  # shared
@@ -118,7 +117,3 @@ def gnn_vae_refined(ctx: SolveContext) -> SolverOutput | None:
         f"then {iterations} tabu iterations from {froms}"
     )
     return SolverOutput(best, model=stored.name, samples=sampled.samples, detail=detail)
-
-
-def _cost(ctx: SolveContext, assignment: Assignments) -> float:
-    return float(ctx.evaluator.evaluate(assignment).costs[ctx.objective][0])

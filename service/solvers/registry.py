@@ -75,6 +75,10 @@ class SolveContext:
     def orientation(self) -> OrientationGraph:
         return OrientationGraph(self.problem, self.cliques)
 
+    def cost(self, assignment: Assignments) -> float:
+        """The objective's cost of a single ``assignment``, by the one evaluator."""
+        return float(self.evaluator.evaluate(assignment).costs[self.objective][0])
+
 
 @dataclass
 class SolverOutput:
