@@ -78,8 +78,25 @@ PLANNED_DRAWS = 4
 # wh_parked 1.00-1.03, two-lane 1.00; of 50 robots two-way 1.08-1.20 (800-900 conflicts,
 # 29-71 ms), one-way 1.29-1.48 (1,000-1,030, 160-409 ms); floors and the conformance sets
 # (wh_25, wh_50, geo_dense_25, geo_10) 1.000-1.002 in 0-5 ms. From PLANNED_MIN_CONFLICTS
-# the plans serve instead (on a two-way warehouse of 100 robots the descent took 0.4 s and
-# beat the draw by 1.28x, the plan by 3 % more).
+# the cheaper of the best draw and the plans gets types by descent on its directions (every
+# objective; for max_completion and sync_completion, which have no plans, the best draw's):
+# the planner keeps following-type wherever the exclusive wait would not hold while a
+# clique has room, first come first served, and its types cost 1.03-1.22x a descent's
+# on its own directions. Measured (session 45, `/tmp/s45/big2.py`, not committed;
+# avg_completion v14, seed 0, held-out seeds of generated warehouses): plan / descended,
+# 100 robots (3,000-4,000 conflicts) two-way 205.7 / 173.7 (0.14 s), 236.4 / 216.1 (0.11 s),
+# two-lane 152.2 / 135.8 (0.29 s), 160.9 / 155.5 (0.25 s), wh_mixed 369.5 / 302.2 (0.35 s),
+# 179.3 / 179.3 (1.0 s); 250 robots (18,500-24,000) two-way 686.4 / 616.5 (1.5 s), 681.9 /
+# 601.8 (2.4 s), two-lane 533.4 / 433.2 (3.3 s), 612.3 / 561.6 (3.2 s), wh_mixed 1230.3 /
+# 996.4 (8.2 s), 521.6 / 497.6 (~30 s). max_completion and sync_completion, the best draw
+# descended (bench.generalization, the same 16 worlds, before / after on one yardstick,
+# docs/benchmarks.md session 45): max 100 robots 0.56-0.62 -> 0.83-0.86, 250 robots
+# 0.65-0.66 -> 0.97-1.00 (1.2-27 s); sync 0.54-0.57 -> 0.74-0.90, 0.58 -> 0.90-0.92. The
+# descent runs until the time limit: at 250 robots a request takes seconds. Descending from
+# the plan's own types instead stalled after 0-11 rounds, 0-3 % cheaper; the best draw's
+# directions descended cost 1.03-2.2x the plan's; more flips a round (32, 128) were 2-3x
+# faster and up to 20 % dearer; re-costing only the flips cheapest when last costed 2-3x
+# faster and up to 16 % dearer.
 
 
 def least_request_s(ctx: SolveContext) -> float:
@@ -128,22 +145,30 @@ def gnn_vae(ctx: SolveContext) -> SolverOutput | None:
 
 
 def model_answer(
-    ctx: SolveContext, sampled: Sampled, deadline: float
+    ctx: SolveContext, sampled: Sampled, deadline: float, descend: bool = True
 ) -> tuple[Assignments, str | None]:
     """``sampled``'s best decoded draw, or what is cheaper, made until ``deadline``: below
     PLANNED_MIN_CONFLICTS conflicts the cheapest draws' directions with the types a
-    descent from all-exclusive reaches (:func:`descended_draws`), from there the cheapest
-    plan in its draws' robot orders (:func:`planned_draws`) -> (answer, what replaced the
-    draw, or None)."""
+    descent from all-exclusive reaches (:func:`descended_draws`); from there the cheaper
+    of the best draw and the cheapest plan in the draws' robot orders
+    (:func:`planned_draws`), and, if ``descend``, its directions with types by descent
+    where cheaper still -> (answer, what replaced the draw, or None)."""
     if ctx.problem.n_conflicts < PLANNED_MIN_CONFLICTS:
         descended = descended_draws(ctx, sampled, deadline)
         if descended is not None and descended[1] < sampled.cost:
             return descended[0], "a cheap draw's directions with types by descent"
         return sampled.assignment, None
+    answer, cost, replaced = sampled.assignment, sampled.cost, None
     planned = planned_draws(ctx, sampled, deadline)
-    if planned is not None and planned[1] < sampled.cost:
-        return planned[0], "a plan in a draw's robot order"
-    return sampled.assignment, None
+    if planned is not None and planned[1] < cost:
+        (answer, cost), replaced = planned, "a plan in a draw's robot order"
+    if descend and time.monotonic() < deadline:
+        descended, descended_cost, _ = descend_types(
+            ctx.orientation, ctx.evaluator, ctx.objective, answer.a_first, deadline
+        )
+        if descended_cost < cost:
+            return descended, f"{replaced or 'the best draw'}, its types by descent"
+    return answer, replaced
 
 
 def descended_draws(

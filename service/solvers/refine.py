@@ -2,7 +2,8 @@
 
 ``gnn_vae_refined`` decodes the GNN-VAE's samples, takes the cheapest (or, where
 cheaper, its directions with types by descent below 1,000 conflicts, a plan in the draws'
-orders from there: see :func:`~service.solvers.gnn_vae.model_answer`), and
+orders from there, with types by descent where the graph is small for the budget: see
+:func:`~service.solvers.gnn_vae.model_answer` and DESCENT_LEAST_SHARE), and
 runs tabu search (:mod:`service.solvers.tabu`) from it and from FCFS (or the
 warm start of a re-schedule, if cheaper), each
 with half of what is left of a 1 s budget (or of the request's time limit, if
@@ -32,6 +33,7 @@ import numpy as np
 from service.solvers.gnn_vae import (
     DEFAULT_SAMPLES,
     embed_fits,
+    least_request_s,
     model_answer,
     plans_serve,
     sample_model,
@@ -40,6 +42,7 @@ from service.solvers.registry import SolveContext, SolverOutput, register
 from service.solvers.tabu import plain_start, tabu_search
 
 __all__ = [
+    "DESCENT_LEAST_SHARE",
     "PLANNED_SAMPLES_LEAST_SHARE",
     "REFINE_SECONDS",
     "SAMPLES_LEAST_SHARE",
@@ -73,6 +76,18 @@ SAMPLES_LEAST_SHARE = 0.25
 # 0.99: tabu ends by patience there, and the second start is what the rest of the time
 # buys.
 PLANNED_SAMPLES_LEAST_SHARE = 0.5
+# From PLANNED_MIN_CONFLICTS conflicts the model's start gets types by descent
+# (``gnn_vae.model_answer``) only where the least model request (``least_request_s``) takes
+# at most this share of the budget: on the generated warehouses of 250 robots (least
+# request 150-190 ms) the descent takes 1.5-30 s, is cut at half the budget dearer than the
+# plan it started from, and the time was tabu's; at 100 robots (25-32 ms) it takes 0.1-1 s.
+# Measured (session 45, bench.generalization, 100 and 250 robots, avg_completion, 1 s;
+# s44's answers / descending everywhere / this rule): 250 robots one-way 955.5 / 984.5 /
+# 976.9, 797.7 / 802.5 / 797.7, two-way 629.7 / 640.7 / 628.3, 646.3 / 649.0 / 641.6,
+# two-lane 514.5 / 514.6 / 514.3, 596.3 / 601.9 / 595.5; 100 robots (s44 / this rule)
+# two-way 179.5 / 162.2, 207.6 / 200.5, two-lane 137.4 / 128.0, 150.5 / 150.9, one-way
+# 297.8 / 244.0, 182.4 / 182.4, wh_mixed 333.6 / 287.1, 177.4 / 177.4.
+DESCENT_LEAST_SHARE = 0.05
 
 
 @register("gnn_vae_refined")
@@ -98,7 +113,7 @@ def gnn_vae_refined(ctx: SolveContext) -> SolverOutput | None:
     if embed_fits(ctx, (PLANNED_SAMPLES_LEAST_SHARE if planned else SAMPLES_LEAST_SHARE) * budget):
         half = time.monotonic() + budget / 2
         sampled = sample_model(ctx, stored, samples, half)
-        starts.insert(0, model_answer(ctx, sampled, half)[0])
+        starts.insert(0, model_answer(ctx, sampled, half, _descends(ctx, budget))[0])
     if planned:
         starts = [min(starts, key=lambda start: ctx.cost(start))]  # the first of equals
     best, best_cost, iterations = starts[0], np.inf, 0
@@ -117,3 +132,9 @@ def gnn_vae_refined(ctx: SolveContext) -> SolverOutput | None:
         f"then {iterations} tabu iterations from {froms}"
     )
     return SolverOutput(best, model=stored.name, samples=sampled.samples, detail=detail)
+
+
+def _descends(ctx: SolveContext, budget: float) -> bool:
+    """Whether the model's start, from PLANNED_MIN_CONFLICTS conflicts, gets types by
+    descent within ``budget`` seconds (see DESCENT_LEAST_SHARE)."""
+    return least_request_s(ctx) <= DESCENT_LEAST_SHARE * budget

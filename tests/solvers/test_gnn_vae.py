@@ -1,6 +1,6 @@
 """gnn_vae's plans in its draws' robot orders: valid, never dearer than the decoded draws,
-only from PLANNED_MIN_CONFLICTS conflicts, and none past the deadline; below, the best
-draw's types by descent where cheaper."""
+only from PLANNED_MIN_CONFLICTS conflicts, and none past the deadline; there the cheaper
+answer's types by descent, below the cheapest draws', where cheaper."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from service.core.assignment import Assignments
 from service.core.check import check
 from service.core.retype import descend_types
 from service.learning import infer
@@ -36,11 +37,18 @@ def _ctx(seed: int, objective: str, models: dict) -> SolveContext:
     )
 
 
+def _descended(ctx: SolveContext, answer: Assignments) -> tuple[Assignments, float, int]:
+    """``answer``'s directions with types by descent, given all the time it takes."""
+    return descend_types(ctx.orientation, ctx.evaluator, ctx.objective, answer.a_first, np.inf)
+
+
 @pytest.mark.parametrize("objective", ["avg_completion", "avg_delay"])
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_plans_in_the_draws_orders_are_valid_and_never_dearer(
     models: dict, monkeypatch: pytest.MonkeyPatch, seed: int, objective: str
 ) -> None:
+    """From PLANNED_MIN_CONFLICTS the cheaper of the best draw and the cheapest plan in the
+    draws' orders, or its directions with types by descent where cheaper still."""
     ctx = _ctx(seed, objective, models)
     samples = gnn.DEFAULT_SAMPLES
     decoded = gnn.sample_model(ctx, models[objective], samples, time.monotonic() + 30.0)
@@ -50,10 +58,33 @@ def test_plans_in_the_draws_orders_are_valid_and_never_dearer(
     assert planned is not None
     assert check(ctx.problem, ctx.cliques, planned[0]).ok.all()
     assert planned[1] == ctx.evaluator.evaluate(planned[0]).costs[objective][0]
-    out = gnn.gnn_vae(ctx)  # the same draws (same seed), then the same plans
+    by_plan = planned[1] < decoded.cost
+    cheaper = planned[0] if by_plan else decoded.assignment
+    descended = _descended(ctx, cheaper)
+    out = gnn.gnn_vae(ctx)  # the same draws (same seed), then the same plans and descent
     assert check(ctx.problem, ctx.cliques, out.assignment).ok.all()
-    assert cost(ctx, out) == min(decoded.cost, planned[1])
-    assert (planned[1] < decoded.cost) == ("a plan in a draw's robot order" in (out.detail or ""))
+    assert cost(ctx, out) == min(decoded.cost, planned[1], descended[1])
+    assert by_plan == ("a plan in a draw's robot order" in (out.detail or ""))
+    assert (descended[1] < min(decoded.cost, planned[1])) == (
+        "types by descent" in (out.detail or "")
+    )
+
+
+def test_from_the_threshold_the_best_draw_of_an_unplanned_objective_is_descended(
+    models: dict, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """max_completion has no plans: from PLANNED_MIN_CONFLICTS the best draw's directions
+    alone get types by descent, answering where cheaper."""
+    monkeypatch.setattr(gnn, "PLANNED_MIN_CONFLICTS", 0)
+    ctx = _ctx(5, "max_completion", models)
+    decoded = gnn.sample_model(ctx, models["max_completion"], 100, time.monotonic() + 30.0)
+    descended = _descended(ctx, decoded.assignment)
+    out = gnn.gnn_vae(ctx)  # the same draws (same seed)
+    assert check(ctx.problem, ctx.cliques, out.assignment).ok.all()
+    assert cost(ctx, out) == min(decoded.cost, descended[1])
+    expected = descended[0] if descended[1] < decoded.cost else decoded.assignment
+    assert np.array_equal(out.assignment.following, expected.following)
+    assert np.array_equal(out.assignment.a_first, decoded.assignment.a_first)
 
 
 @pytest.mark.parametrize("objective", ["avg_completion", "max_completion"])

@@ -110,8 +110,8 @@ def test_refined_starts_from_a_plan_in_the_draws_orders_where_cheaper(
     monkeypatch.setattr(gnn, "PLANNED_MIN_CONFLICTS", 0)
     starts: list[float] = []
 
-    def spied(ctx: SolveContext, sampled: object, deadline: float) -> tuple:
-        answer, replaced = gnn.model_answer(ctx, sampled, deadline)
+    def spied(ctx: SolveContext, sampled: object, deadline: float, descend: bool) -> tuple:
+        answer, replaced = gnn.model_answer(ctx, sampled, deadline, descend)
         starts.append(float(ctx.evaluator.evaluate(answer).costs[ctx.objective][0]))
         assert starts[-1] <= sampled.cost
         return answer, replaced
@@ -141,8 +141,8 @@ def test_where_plans_serve_tabu_runs_from_the_cheaper_start_alone(
         searched.append(cost(ctx, SolverOutput(start)))
         return real_tabu(ctx, start, **kwargs)
 
-    def model_start(ctx: SolveContext, sampled: object, deadline: float) -> tuple:
-        answer, replaced = real_start(ctx, sampled, deadline)
+    def model_start(ctx: SolveContext, sampled: object, deadline: float, descend: bool) -> tuple:
+        answer, replaced = real_start(ctx, sampled, deadline, descend)
         model_starts.append(cost(ctx, SolverOutput(answer)))
         return answer, replaced
 
@@ -160,3 +160,26 @@ def test_where_plans_serve_tabu_runs_from_the_cheaper_start_alone(
     assert searched[0] == min(model_starts[0], fcfs_start)
     assert check(ctx.problem, ctx.cliques, out.assignment).ok.all()
     assert cost(ctx, out) <= searched[0] + 1e-9
+
+
+@pytest.mark.parametrize(("share", "descends"), [(1.0, True), (0.0, False)])
+def test_the_model_start_is_descended_only_where_the_least_request_is_small(
+    share: float, descends: bool, models: dict, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """From PLANNED_MIN_CONFLICTS conflicts the model's start gets types by descent only
+    where the least model request takes at most DESCENT_LEAST_SHARE of the budget."""
+    from service.solvers import gnn_vae as gnn
+    from service.solvers import refine
+
+    asked: list[bool] = []
+    real_start = refine.model_answer
+
+    def model_start(ctx: SolveContext, sampled: object, deadline: float, descend: bool) -> tuple:
+        asked.append(descend)
+        return real_start(ctx, sampled, deadline, descend)
+
+    monkeypatch.setattr(gnn, "PLANNED_MIN_CONFLICTS", 0)
+    monkeypatch.setattr(refine, "DESCENT_LEAST_SHARE", share)
+    monkeypatch.setattr(refine, "model_answer", model_start)
+    out = gnn_vae_refined(_ctx(5, "avg_completion", models))
+    assert out is not None and asked == [descends]
