@@ -357,3 +357,58 @@ def test_plans_replace_the_instant_answer_where_one_is_found(
     assert bool(sought) != plan_found
     checks = check(problem, ctx.cliques, found.assignment)
     assert checks.acyclic[0] and checks.density[0] and checks.forced[0]
+
+
+@pytest.mark.parametrize(
+    ("objective", "per_conflict"),
+    [("max_completion", None), ("sync_completion", None), ("max_completion", 1.0)],
+)
+def test_the_first_stage_answer_of_max_and_sync_gets_types_by_descent_where_cheaper(
+    objective: str, per_conflict: float | None, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """For DESCENT_OBJECTIVES above exact_max_conflicts the first stage's directions get
+    types by descent from all-exclusive (``retype.descend_types``): called once, with the
+    first stage's directions, and kept exactly where cheaper (the stages say so); not
+    where the time left after the first stage is less than DESCENT_S_PER_CONFLICT's (1 s a
+    conflict: never), and then the first stage has the whole budget."""
+    import service.solvers.portfolio as portfolio
+    from service.core.retype import descend_types
+
+    calls: list[tuple[np.ndarray, float]] = []  # (directions, cost of the first stage's answer)
+    real_first = portfolio.get_solver("priority_tabu")
+
+    budgets: list[float] = []
+
+    def first_stage(ctx: SolveContext) -> Any:
+        budgets.append(ctx.time_limit_s)
+        found = real_first(ctx)
+        calls.append((found.assignment.a_first.copy(), ctx.cost(found.assignment)))
+        return found
+
+    descended: list[float] = []
+
+    def descend(*args: Any) -> Any:
+        found = descend_types(*args)
+        descended.append(found[1])
+        return found
+
+    monkeypatch.setattr(portfolio, "get_solver", lambda name: first_stage)
+    monkeypatch.setattr(portfolio, "descend_types", descend)
+    if per_conflict is not None:
+        monkeypatch.setattr(portfolio, "DESCENT_S_PER_CONFLICT", per_conflict)
+    line = json.loads((DATA / "wh_25.jsonl").read_text().splitlines()[0])
+    body = {
+        **line["request"],
+        "objective": objective,
+        "options": {"solver": "auto", "time_limit_s": 1.0},
+    }
+    policy = DispatchPolicy(exact_max_conflicts=0, exact_stage_max_conflicts=10)
+    answer = dispatch(ScheduleRequest.model_validate(body), policy)
+    assert answer.checks.acyclic and answer.checks.density
+    assert len(calls) == 1
+    if per_conflict is not None:  # no time for the descent: the first stage had it all
+        assert not descended and budgets[0] > 0.9
+        return
+    assert len(descended) == 1 and budgets[0] < 0.35
+    assert ("types by descent" in answer.solver.detail) == (descended[0] < calls[0][1])
+    assert answer.cost <= min(descended[0], calls[0][1]) + 1e-9
