@@ -13,8 +13,9 @@ comes first, improving in stages:
    measured better than the GNN-VAE refined by tabu search, ``gnn_vae_refined``), or
    tabu search from the previous answer in a re-schedule, with FIRST_STAGE_SHARE of
    the budget; for max_completion and sync_completion, where time allows, its answer's
-   directions then get types by descent (DESCENT_OBJECTIVES). From ``lns_min_conflicts`` conflicts (avg_completion, avg_delay) instead
-   the cheapest of PLANNED_ORDERS prioritized plans of the whole fleet (milliseconds),
+   directions then get types by descent (DESCENT_OBJECTIVES). From
+   ``lns_min_conflicts`` conflicts (avg_completion, avg_delay) instead the cheapest of
+   PLANNED_ORDERS prioritized plans of the whole fleet (milliseconds),
    the instant answer only where no plan is found, then re-insertion search
    (:mod:`service.solvers.reinsert`: neighbourhoods repaired by prioritized planning,
    ~1-4 ms a step) and priority search in turns (:mod:`service.solvers.turns`), with
@@ -345,7 +346,7 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
         descends = ctx.objective in DESCENT_OBJECTIVES and (
             (1 - FIRST_STAGE_SHARE) * left >= DESCENT_S_PER_CONFLICT * problem.n_conflicts
         )
-        # a stage follows
+        # Whether a stage follows the first: the descent, LNS, or CP-SAT where it fits.
         shared = uses_lns or descends or (1 - FIRST_STAGE_SHARE) * left > exact_min_s
         found = get_solver(first)(_with_time(ctx, FIRST_STAGE_SHARE * left if shared else left))
         found_cost = np.inf if found is None else ctx.cost(found.assignment)
