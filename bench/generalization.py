@@ -70,6 +70,7 @@ from bench.report import (
     JsonCache,
     add_run_args,
     fmt,
+    git_commit,
     jsonable,
     machine_info,
     markdown_table,
@@ -210,8 +211,10 @@ def methods_of(models: Sequence[str | None]) -> list[tuple[str, str, str | None]
 
 
 def reference_runs(case: Case, cfg: Config, policy: DispatchPolicy) -> list[dict[str, Any]]:
-    """``auto`` and ``tabu`` with the reference budget each: cost, proof, who answered, time."""
-    runs = []
+    """``auto`` and ``tabu`` with the reference budget each: cost, proof, who answered, time,
+    and the commit that ran them (the cache is keyed by request, objective and budget, not
+    by code: an old commit says the reference may be stale)."""
+    runs, commit = [], git_commit()
     for solver in REFERENCE_SOLVERS:
         options = {"solver": solver, "time_limit_s": cfg.ref_budget_s, "seed": 0}
         answer, seconds = solve_case(case, policy, options)
@@ -222,6 +225,7 @@ def reference_runs(case: Case, cfg: Config, policy: DispatchPolicy) -> list[dict
                 "optimal": answer.solver.optimal,
                 "solver_used": answer.solver.name,
                 "runtime_s": seconds,
+                "commit": commit,
             }
         )
     return runs
@@ -494,9 +498,16 @@ def reference_text(problems: Sequence[dict[str, Any]]) -> str:
         sources[p["ref_source"]] = sources.get(p["ref_source"], 0) + 1
     counts = ", ".join(f"`{source}` on {n}" for source, n in sources.items())
     proven = sum(p["ref_proven"] for p in problems)
+    commits: dict[str, int] = {}
+    for p in problems:
+        for run in p["references"]:
+            commit = run.get("commit") or "unrecorded (cached before session 45)"
+            commits[commit] = commits.get(commit, 0) + 1
+    computed = ", ".join(f"{commit} ({n})" for commit, n in commits.items())
     return (
         f"References (the first run to reach each problem's best): {counts}; "
-        f"proven optimal: {proven} of {len(problems)}."
+        f"proven optimal: {proven} of {len(problems)}. Reference runs computed at commit: "
+        f"{computed}."
     )
 
 

@@ -26,6 +26,7 @@ __all__ = [
     "delay_ratio",
     "fmt",
     "format_table",
+    "git_commit",
     "jsonable",
     "machine_info",
     "markdown_table",
@@ -214,7 +215,7 @@ def _cpu_model() -> str:
     return platform.processor() or platform.machine()
 
 
-def _git_commit() -> str | None:
+def git_commit() -> str | None:
     """The checked-out commit, if this runs inside a git work tree."""
     try:
         out = subprocess.run(
@@ -246,7 +247,7 @@ def machine_info() -> dict[str, Any]:
         "platform": platform.platform(),
         "python": platform.python_version(),
         "packages": versions,
-        "commit": _git_commit(),
+        "commit": git_commit(),
     }
 
 

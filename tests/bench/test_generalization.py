@@ -19,7 +19,7 @@ from bench.generalization import (
     model_text,
     target_table,
 )
-from bench.report import config_from_args
+from bench.report import config_from_args, git_commit
 
 SHIPPED_MODEL = Path(__file__).resolve().parents[2] / "model_store" / "avg_completion" / "v4"
 # Two kinds, one held out (wh_two_lane, by default), one small world each, short budgets.
@@ -59,6 +59,10 @@ def test_run_writes_everything_against_the_reference_and_reuses_it(
         ("wh_two_lane", HELD),
     }
     assert "Issue 13's targets" in (out / "tables.md").read_text()
+    # Each reference run records the commit that ran it, and the tables say which.
+    commits = {run["commit"] for p in first["problems"] for run in p["references"]}
+    assert commits == {git_commit()}
+    assert f"computed at commit: {git_commit()} (" in (out / "tables.md").read_text()
 
     def no_solve(*args, **kwargs):
         raise AssertionError("the reference was solved again")
