@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -197,6 +198,30 @@ def test_the_best_sample_gets_the_types_its_directions_gain_most_from(
         assert found.cost == pytest.approx(expect_cost, rel=1e-12)
         assert np.array_equal(found.top_directions, candidates.a_first[top])
     assert best.cost <= refits[0][1] + 1e-9 and refits[0][1] <= costs.min() * (1 + 1e-12) + 1e-9
+    assert check(problem, cliques, best.assignment).ok.all()
+
+
+@pytest.mark.parametrize(("deadline_s", "refits"), [(60.0, infer.REFIT_TOP), (-1.0, 1)])
+def test_past_the_deadline_only_the_cheapest_draw_is_refitted(
+    deadline_s: float, refits: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """With time left every one of the REFIT_TOP cheapest draws is refitted; once the
+    deadline has passed (here before the first chunk ends) only the cheapest, so that the
+    time limit holds on graphs where a refit takes long."""
+    problem, cliques = _problem(stitched_problem(7, 30, 4.0))
+    decoder, evaluator = Decoder(problem, cliques), Evaluator(problem)
+    torch.manual_seed(7)
+    model, graph = GnnVae(TINY).eval(), graph_tensors(problem, cliques)
+    refitted: list[float] = []  # the cost of each draw refitted
+
+    def counted(*args: object) -> tuple:
+        refitted.append(evaluator.evaluate(args[3]).costs["avg_completion"][0])
+        return refit_types(*args)
+
+    monkeypatch.setattr(infer, "refit_types", counted)
+    deadline = time.monotonic() + deadline_s
+    best = sample_best(model, graph, decoder, evaluator, "avg_completion", 8, 7, deadline=deadline)
+    assert len(refitted) == refits and refitted[0] == min(refitted)
     assert check(problem, cliques, best.assignment).ok.all()
 
 
