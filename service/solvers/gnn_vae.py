@@ -154,7 +154,7 @@ def model_answer(
     (:func:`planned_draws`), and, if ``descend``, its directions with types by descent
     where cheaper still -> (answer, what replaced the draw, or None)."""
     if ctx.problem.n_conflicts < PLANNED_MIN_CONFLICTS:
-        descended = descended_draws(ctx, sampled, deadline)
+        descended = descended_draws(ctx, sampled.top_directions, deadline)
         if descended is not None and descended[1] < sampled.cost:
             return descended[0], "a cheap draw's directions with types by descent"
         return sampled.assignment, None
@@ -162,24 +162,21 @@ def model_answer(
     planned = planned_draws(ctx, sampled, deadline)
     if planned is not None and planned[1] < cost:
         (answer, cost), replaced = planned, "a plan in a draw's robot order"
-    if descend and time.monotonic() < deadline:
-        descended, descended_cost, _ = descend_types(
-            ctx.orientation, ctx.evaluator, ctx.objective, answer.a_first, deadline
-        )
-        if descended_cost < cost:
-            return descended, f"{replaced or 'the best draw'}, its types by descent"
+    descended = descended_draws(ctx, answer.a_first, deadline) if descend else None
+    if descended is not None and descended[1] < cost:
+        return descended[0], f"{replaced or 'the best draw'}, its types by descent"
     return answer, replaced
 
 
 def descended_draws(
-    ctx: SolveContext, sampled: Sampled, deadline: float
+    ctx: SolveContext, rows: np.ndarray, deadline: float
 ) -> tuple[Assignments, float] | None:
     """The cheapest of the types by descent (``retype.descend_types``) on the directions
-    of ``sampled``'s cheapest draws (each distinct once, cheapest first), made until
-    ``deadline`` -> (answer, cost); None where none was started in time."""
+    ``rows`` (T, M) (each distinct once, in order: the cheapest draws' or one answer's),
+    made until ``deadline`` -> (answer, cost); None where none was started in time."""
     found: tuple[Assignments, float] | None = None
     seen: list[np.ndarray] = []
-    for directions in sampled.top_directions:  # (M,) each
+    for directions in rows:  # (M,) each
         if time.monotonic() >= deadline:
             break
         if any(np.array_equal(directions, done) for done in seen):
