@@ -653,6 +653,20 @@ class Evaluator:
             raise ValueError("the assignment's constraint graph has a cycle")
         return np.maximum(latest, evaluation.event_delay[sample])  # rounding: never below
 
+    def critical(
+        self, assignments: Assignments, evaluation: Evaluation, held: np.ndarray, sample: int = 0
+    ) -> np.ndarray:
+        """(E+1,) bool: the events of one evaluated sample from which a path of constraints
+        that hold with equality leads to a ``held`` (E+1,) bool event (the held ones among
+        them): their latest delays (:meth:`latest_delays`) are their least. Only a wait at
+        such an event can hold up a held one, so only there can a relaxed wait lower it.
+
+        Raises:
+            ValueError: the sample's constraint graph has a cycle.
+        """
+        least = evaluation.event_delay[sample]  # (E+1,)
+        return self.latest_delays(assignments, evaluation, held, sample) <= least + self._tight
+
     def evaluate_with_latest(
         self, assignment: Assignments, held: np.ndarray, slope: np.ndarray | None = None
     ) -> tuple[Evaluation, np.ndarray | None]:

@@ -20,6 +20,14 @@ fill by spared wait stops in poor local optima where following-type couples robo
 5-s ``auto`` answer of a two-way warehouse of 100 robots, the refit types cost 2.0x that
 answer and no single flip improved them, where the descent from exclusive reached 1.05x
 in 55 flips (docs/benchmarks.md, session 44). A round takes up to FLIPS_PER_ROUND flips.
+It costs only the flips that may be cheaper: a following-type conflict's constraint (the
+first side's pair enter) never asks more than its exclusive one (its pair exit, later on
+the same robot), so a flip to exclusive only raises delays, and a flip to following only
+lowers the events that a path of tight constraints leads to from its wait. For the
+objectives that never fall when a delay rises (MONOTONE_OBJECTIVES) only flips to
+following of binding waits with such a path to an event the cost reads can be cheaper;
+on a 250-robot two-lane warehouse that is a third of the binding waits for avg_completion
+and a tenth for max_completion (docs/benchmarks.md, session 46).
 """
 
 from __future__ import annotations
@@ -35,7 +43,14 @@ from service.core.incremental import IncrementalEvaluator, apply_moves
 from service.core.orientation import OrientationGraph
 from service.core.schemas import Objective
 
-__all__ = ["FLIPS_PER_ROUND", "REFIT_ROUNDS", "descend_types", "refit_types", "updated_pair_times"]
+__all__ = [
+    "FLIPS_PER_ROUND",
+    "MONOTONE_OBJECTIVES",
+    "REFIT_ROUNDS",
+    "descend_types",
+    "refit_types",
+    "updated_pair_times",
+]
 
 # Rounds at updated times after the one at planned times (each stops the refit when it
 # is not cheaper); the third still improved on some 250-robot worlds.
@@ -47,6 +62,9 @@ REFIT_ROUNDS = 3
 FLIPS_PER_ROUND = 8
 # Flips costed between two looks at the deadline in a round of descend_types.
 COSTED_PER_CHECK = 64
+# Objectives that never fall when a delay rises (sync_completion, the mean completion plus
+# the spread, may: a robot delayed toward the mean narrows the spread).
+MONOTONE_OBJECTIVES: tuple[Objective, ...] = ("avg_completion", "max_completion", "avg_delay")
 
 
 def updated_pair_times(
@@ -100,7 +118,8 @@ def descend_types(
     keeps the answer valid is cheaper
     (:meth:`~service.core.orientation.OrientationGraph.feasible`: never a realized type,
     never past a clique's budget) or ``deadline`` (monotonic) passes -> (the answer, its
-    cost, rounds). A round costs every flip incrementally
+    cost, rounds). A round costs every flip that may be cheaper (:func:`_type_flips`)
+    incrementally
     (:class:`~service.core.incremental.IncrementalEvaluator`: the one evaluator's numbers)
     and takes the cheapest alone or, where cheaper still, with up to FLIPS_PER_ROUND - 1
     more of the cheaper ones in order of their own cost (each still valid on top of those
@@ -113,7 +132,7 @@ def descend_types(
     incremental = IncrementalEvaluator(evaluator)
     rounds = 0
     while time.monotonic() < deadline:
-        moves = _type_flips(orientation, evaluator, answer, evaluation, may)  # (K,)
+        moves = _type_flips(orientation, evaluator, answer, evaluation, may, objective)  # (K,)
         costs = _flip_costs(incremental, answer, evaluation, moves, objective, deadline)
         if costs is None:  # the deadline passed during the round
             break
@@ -122,10 +141,12 @@ def descend_types(
         if not cheaper.size:
             break
         best = apply_moves(answer, cheaper[:1])
-        combined = best
+        combined, counts = best, orientation.cliques.following_counts(best.following)[0]  # (Q,)
         for move in cheaper[1:]:
-            if orientation.feasible(combined.a_first[0], combined.following[0], move[None])[0]:
+            a_first, following = combined.a_first[0], combined.following[0]
+            if orientation.feasible(a_first, following, move[None], counts)[0]:
                 combined = apply_moves(combined, move[None])
+                orientation.count_type_move(counts, int(move) - problem.n_conflicts, True)
         taken = (best,) if combined is best else (best, combined)
         found = min(
             ((evaluator.evaluate(option), option) for option in taken),
@@ -164,11 +185,40 @@ def _type_flips(
     answer: Assignments,
     evaluation: Evaluation,
     may: np.ndarray,
+    objective: Objective,
 ) -> np.ndarray:
     """The type flips (moves M + m) of ``answer`` that keep it valid and may lower its
-    cost: of a conflict whose type ``may`` (M,) change, following-type, or exclusive with a
-    wait that binds. Following-type relaxes the wait and adds an exit order, so elsewhere
-    it changes nothing, or adds a wait."""
-    useful = may & (answer.following[0] | evaluator.binding(answer, evaluation))  # (M,)
+    ``objective``: of a conflict whose type ``may`` (M,) change, a binding wait made
+    following-type, or (except for MONOTONE_OBJECTIVES, which a flip to exclusive never
+    lowers) a following-type conflict made exclusive; for MONOTONE_OBJECTIVES only the
+    waits critical to an event the cost reads (:func:`_critical_waits`). Any other flip
+    changes no delay, or only raises delays."""
+    binding = may & evaluator.binding(answer, evaluation)  # (M,)
+    if objective in MONOTONE_OBJECTIVES:
+        useful = binding & ~answer.following[0]
+        useful &= _critical_waits(evaluator, answer, evaluation, objective)
+    else:
+        useful = binding | (may & answer.following[0])
     flips = orientation.problem.n_conflicts + np.flatnonzero(useful)  # (K,)
     return flips[orientation.feasible(answer.a_first[0], answer.following[0], flips)]
+
+
+def _critical_waits(
+    evaluator: Evaluator, answer: Assignments, evaluation: Evaluation, objective: Objective
+) -> np.ndarray:
+    """(M,) bool: conflicts whose wait (at the pair enter of the side passing second) is
+    critical (:meth:`~service.core.evaluate.Evaluator.critical`) to an event ``objective``
+    (one of MONOTONE_OBJECTIVES) reads: every robot's completion event for avg_completion,
+    every event it weighs for avg_delay, the completion events of the robots that finish
+    last for max_completion (the maximum falls only where all of theirs fall)."""
+    graph = evaluator.graph
+    if objective == "max_completion":
+        completion = evaluation.completion[0]  # (R,)
+        held = np.zeros(evaluator.n_events + 1, dtype=bool)  # (E+1,)
+        held[graph.last_event[completion >= completion.max()]] = True
+    else:
+        held = evaluator.objective_weights(objective) > 0  # (E+1,)
+    held[-1] = False  # the zero-delay slot: robots without events never change
+    critical = evaluator.critical(answer, evaluation, held)  # (E+1,)
+    slots = 2 * np.arange(answer.a_first.shape[1]) + answer.a_first[0]  # (M,)
+    return critical[graph.target[slots]]

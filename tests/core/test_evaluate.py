@@ -444,6 +444,36 @@ def test_latest_delays_are_the_latest_that_keep_the_held_events(seed: int, stitc
             assert (_walk_with_floor(problem, assignment, floor)[held] > least[held] + 0.5).any()
 
 
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 10_000), stitched=st.booleans(), n_held=st.integers(1, 4))
+def test_critical_events_are_those_no_delay_of_which_leaves_the_held_events(
+    seed: int, stitched: bool, n_held: int
+) -> None:
+    """An event is critical to some held events exactly when any rise of its delay (a
+    floor on it, the rest walked again) raises one of them by as much; the others can
+    rise a little and leave every held event where it was."""
+    problem = _problem(stitched_problem(seed, 10, 3.0) if stitched else small_problem(seed))
+    rng = np.random.default_rng(seed)
+    assignment = _decoded(problem, seed)
+    ev = Evaluator(problem)
+    evaluation = ev.evaluate(assignment)
+    least = evaluation.event_delay[0]  # (E+1,)
+    held = np.zeros(least.size, dtype=bool)
+    held[rng.choice(ev.n_events, size=min(n_held, ev.n_events), replace=False)] = True
+    critical = ev.critical(assignment, evaluation, held)  # (E+1,)
+    assert critical[held].all()
+    latest = ev.latest_delays(assignment, evaluation, held)
+    rise = 1e-3
+    for e in np.flatnonzero(~held[:-1]):
+        floor = np.zeros(least.size)
+        floor[e] = least[e] + (rise if critical[e] else min(rise, (latest[e] - least[e]) / 2))
+        raised = _walk_with_floor(problem, assignment, floor)[held] - least[held]
+        if critical[e]:
+            assert raised.max() == pytest.approx(rise, rel=1e-6)
+        else:  # room to rise (latest_delays is checked against walks above)
+            assert latest[e] > least[e] and raised.max() == pytest.approx(0.0, abs=1e-9)
+
+
 @settings(max_examples=30, deadline=None, derandomize=True)
 @given(seed=st.integers(0, 10_000), stitched=st.booleans())
 def test_slopes_bound_what_a_push_past_the_latest_raises(seed: int, stitched: bool) -> None:

@@ -190,3 +190,32 @@ def test_types_by_descent_stop_within_a_round_once_the_deadline_passes(
         orientation, evaluator, "avg_completion", start.a_first, 5.0
     )
     assert rounds == 0 and not found.following[0][problem.fixed_type < 0].any()
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    seed=STARTS["seed"],
+    draw=STARTS["draw"],
+    objective=st.sampled_from(retype.MONOTONE_OBJECTIVES),
+)
+def test_the_flips_a_descent_leaves_uncosted_are_never_cheaper(
+    seed: int, draw: int, objective: str
+) -> None:
+    """For the objectives that never fall when a delay rises, every feasible type flip that
+    a round of the descent does not list (following made exclusive, waits that do not bind
+    or hold up nothing the cost reads) costs at least as much by full evaluation, from
+    any valid answer (decoded types, following ones among them)."""
+    problem, cliques, decoder, evaluator = _setup(seed)
+    start = _random_start(decoder, problem, draw)
+    orientation = OrientationGraph(problem, cliques)
+    evaluation = evaluator.evaluate(start)
+    may = (problem.fixed_type < 0) & ~cliques.forbidden()  # (M,)
+    listed = retype._type_flips(orientation, evaluator, start, evaluation, may, objective)
+    every = problem.n_conflicts + np.arange(problem.n_conflicts)  # (M,)
+    unlisted = np.setdiff1d(
+        every[orientation.feasible(start.a_first[0], start.following[0], every)], listed
+    )
+    cost = float(evaluation.costs[objective][0])
+    if unlisted.size:
+        costs = evaluator.evaluate(apply_moves(start, unlisted)).costs[objective]
+        assert costs.min() >= cost - 1e-9 * max(1.0, abs(cost))
