@@ -653,19 +653,26 @@ class Evaluator:
             raise ValueError("the assignment's constraint graph has a cycle")
         return np.maximum(latest, evaluation.event_delay[sample])  # rounding: never below
 
-    def critical(
-        self, assignments: Assignments, evaluation: Evaluation, held: np.ndarray, sample: int = 0
-    ) -> np.ndarray:
-        """(E+1,) bool: the events of one evaluated sample from which a path of constraints
-        that hold with equality leads to a ``held`` (E+1,) bool event (the held ones among
-        them): their latest delays (:meth:`latest_delays`) are their least. Only a wait at
-        such an event can hold up a held one, so only there can a relaxed wait lower it.
+    def critical_slopes(
+        self, assignment: Assignments, held: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Of a single acyclic assignment and ``held`` (E+1,) float weights (held where > 0):
+        (critical (E+1,) bool, slope (E+1,) float). Critical events are those from which a
+        path of constraints that hold with equality leads to a held event (the held ones
+        among them): their latest delays (:meth:`latest_delays`) are their least. Only a
+        wait at such an event holds up a held one, so only there can a relaxed wait lower
+        one. The slopes are :meth:`evaluate_with_latest`'s: at a critical event at least
+        the held weight those paths reach, so what a fall of its delay by x lowers the
+        held events' weighted delays by is at most x times its slope.
 
         Raises:
-            ValueError: the sample's constraint graph has a cycle.
+            ValueError: the assignment's constraint graph has a cycle.
         """
-        least = evaluation.event_delay[sample]  # (E+1,)
-        return self.latest_delays(assignments, evaluation, held, sample) <= least + self._tight
+        slope = np.empty(self.n_events + 1)  # (E+1,)
+        evaluation, latest = self.evaluate_with_latest(assignment, held, slope)
+        if latest is None:
+            raise ValueError("the assignment's constraint graph has a cycle")
+        return latest <= evaluation.event_delay[0] + self._tight, slope
 
     def evaluate_with_latest(
         self, assignment: Assignments, held: np.ndarray, slope: np.ndarray | None = None

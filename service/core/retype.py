@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import time
 
+import numba
 import numpy as np
 
 from service.core.assignment import Assignments
@@ -60,7 +61,11 @@ REFIT_ROUNDS = 3
 # warehouses of 50 robots, 820-1,020 conflicts): one flip a round 120-236 ms; 4 49-141 ms
 # and costs within 0.4 % either way; 8 44-69 ms, 0-4 % dearer; 16 26-54 ms, 1-5 % dearer.
 FLIPS_PER_ROUND = 8
-# Flips costed between two looks at the deadline in a round of descend_types.
+# Flips costed between two looks at the deadline in a round of descend_types, at most: the
+# first chunk costs twice FLIPS_PER_ROUND, each next one twice the last. Each call of the
+# incremental evaluator orders the whole graph first (~1 ms at 250 robots): small chunks
+# throughout slow the unbounded descent of sync_completion, while the bounded ones mostly
+# stop within 16-48 flips (session 46).
 COSTED_PER_CHECK = 64
 # Objectives that never fall when a delay rises (sync_completion, the mean completion plus
 # the spread, may: a robot delayed toward the mean narrows the spread).
@@ -118,22 +123,25 @@ def descend_types(
     keeps the answer valid is cheaper
     (:meth:`~service.core.orientation.OrientationGraph.feasible`: never a realized type,
     never past a clique's budget) or ``deadline`` (monotonic) passes -> (the answer, its
-    cost, rounds). A round costs every flip that may be cheaper (:func:`_type_flips`)
+    cost, rounds). A round costs the flips that may be cheaper (:func:`_type_flips`)
     incrementally
-    (:class:`~service.core.incremental.IncrementalEvaluator`: the one evaluator's numbers)
-    and takes the cheapest alone or, where cheaper still, with up to FLIPS_PER_ROUND - 1
-    more of the cheaper ones in order of their own cost (each still valid on top of those
-    before). The answer is valid whenever the directions are."""
+    (:class:`~service.core.incremental.IncrementalEvaluator`: the one evaluator's numbers),
+    those that may gain most first, until none left may gain as much as the
+    FLIPS_PER_ROUND-th cheapest (:class:`_FlipBounds`), and takes the cheapest alone or,
+    where cheaper still, with up to FLIPS_PER_ROUND - 1 more of the cheaper ones in order
+    of their own cost (each still valid on top of those before): the same flips as when
+    every one is costed. The answer is valid whenever the directions are."""
     problem = orientation.problem
     answer = Assignments(a_first, (problem.fixed_type == 1)[None])  # (1, M) each
     evaluation = evaluator.evaluate(answer)
     cost = float(evaluation.costs[objective][0])
     may = (problem.fixed_type < 0) & ~orientation.cliques.forbidden()  # (M,)
-    incremental = IncrementalEvaluator(evaluator)
+    incremental, bounds = IncrementalEvaluator(evaluator), _FlipBounds(evaluator, objective)
     rounds = 0
     while time.monotonic() < deadline:
         moves = _type_flips(orientation, evaluator, answer, evaluation, may, objective)  # (K,)
-        costs = _flip_costs(incremental, answer, evaluation, moves, objective, deadline)
+        gains = bounds.of(answer, evaluation, moves)  # (K,)
+        costs = _flip_costs(incremental, answer, evaluation, moves, gains, objective, deadline)
         if costs is None:  # the deadline passed during the round
             break
         order = np.argsort(costs, kind="stable")
@@ -164,19 +172,32 @@ def _flip_costs(
     answer: Assignments,
     evaluation: Evaluation,
     moves: np.ndarray,
+    gains: np.ndarray,
     objective: Objective,
     deadline: float,
 ) -> np.ndarray | None:
-    """Each of ``moves``' (K,) cost (K,), in chunks of COSTED_PER_CHECK with the
-    ``deadline`` (monotonic) checked between them (None: it passed): a move can propagate
+    """The costs (K,) of ``moves`` (K,) that may be among the FLIPS_PER_ROUND cheapest
+    below ``answer``'s (inf for the others): costed in order of ``gains`` (K,), the most
+    each may lower the cost, in growing chunks (see COSTED_PER_CHECK), until the next may
+    gain nothing or less than the FLIPS_PER_ROUND-th largest gain found. The ``deadline``
+    (monotonic) is checked between chunks (None: it passed): a move can propagate
     through every event, so a whole round of a large graph could run far past it."""
-    costs = []
-    for lo in range(0, moves.size, COSTED_PER_CHECK):
+    cost = float(evaluation.costs[objective][0])
+    costs = np.full(moves.size, np.inf)  # (K,)
+    order = np.argsort(-gains, kind="stable")  # (K,) the most promising first
+    lo, size = 0, FLIPS_PER_ROUND
+    while lo < moves.size:
+        found = cost - costs[order[:lo]]  # (lo,) gains of those costed
+        bar = np.sort(found)[-FLIPS_PER_ROUND] if lo >= FLIPS_PER_ROUND else -np.inf
+        if not gains[order[lo]] >= max(bar, 0.0) or gains[order[lo]] <= 0:
+            break
         if lo and time.monotonic() >= deadline:
             return None
-        chunk = moves[lo : lo + COSTED_PER_CHECK]
-        costs.append(incremental.costs(answer, evaluation, chunk)[objective])
-    return np.concatenate(costs) if costs else np.empty(0)
+        size = min(2 * size, COSTED_PER_CHECK)
+        chunk = order[lo : lo + size]
+        costs[chunk] = incremental.costs(answer, evaluation, moves[chunk])[objective]
+        lo += chunk.size
+    return costs
 
 
 def _type_flips(
@@ -190,35 +211,104 @@ def _type_flips(
     """The type flips (moves M + m) of ``answer`` that keep it valid and may lower its
     ``objective``: of a conflict whose type ``may`` (M,) change, a binding wait made
     following-type, or (except for MONOTONE_OBJECTIVES, which a flip to exclusive never
-    lowers) a following-type conflict made exclusive; for MONOTONE_OBJECTIVES only the
-    waits critical to an event the cost reads (:func:`_critical_waits`). Any other flip
-    changes no delay, or only raises delays."""
-    binding = may & evaluator.binding(answer, evaluation)  # (M,)
+    lowers) a following-type conflict made exclusive. Any other flip changes no delay,
+    or only raises delays."""
+    useful = may & evaluator.binding(answer, evaluation)  # (M,)
     if objective in MONOTONE_OBJECTIVES:
-        useful = binding & ~answer.following[0]
-        useful &= _critical_waits(evaluator, answer, evaluation, objective)
+        useful &= ~answer.following[0]
     else:
-        useful = binding | (may & answer.following[0])
+        useful |= may & answer.following[0]
     flips = orientation.problem.n_conflicts + np.flatnonzero(useful)  # (K,)
     return flips[orientation.feasible(answer.a_first[0], answer.following[0], flips)]
 
 
-def _critical_waits(
-    evaluator: Evaluator, answer: Assignments, evaluation: Evaluation, objective: Objective
-) -> np.ndarray:
-    """(M,) bool: conflicts whose wait (at the pair enter of the side passing second) is
-    critical (:meth:`~service.core.evaluate.Evaluator.critical`) to an event ``objective``
-    (one of MONOTONE_OBJECTIVES) reads: every robot's completion event for avg_completion,
-    every event it weighs for avg_delay, the completion events of the robots that finish
-    last for max_completion (the maximum falls only where all of theirs fall)."""
-    graph = evaluator.graph
-    if objective == "max_completion":
+class _FlipBounds:
+    """The most each flip of a binding wait to following-type can lower a cost of
+    MONOTONE_OBJECTIVES (inf for the others: no bound), built once per descent (E events,
+    M conflicts).
+
+    Its wait's event falls by its relief: down to what its other constraints (its
+    robot's previous event, its other conflicts, and the flipped conflict's own
+    following-type constraint) ask, at least zero; none of them reads an event after it.
+    Every other event falls by at most that much, and only those a path of constraints
+    that hold with equality leads to (only through such a path does a fall travel). So a
+    wait not critical to an event the cost reads
+    (:meth:`~service.core.evaluate.Evaluator.critical_slopes`) gains nothing; a critical
+    one at most its relief times its slope, the cost's weight those paths reach (the
+    maximum: its relief; avg_completion: the robots' count over the fleet's).
+    """
+
+    def __init__(self, evaluator: Evaluator, objective: Objective) -> None:
+        graph = evaluator.graph
+        self.evaluator, self.objective = evaluator, objective
+        n_events = evaluator.n_events
+        chain_prev = np.full(n_events, -1, dtype=np.int64)  # (E,) previous event of the robot
+        has_next = graph.chain_next >= 0
+        chain_prev[graph.chain_next[has_next]] = np.flatnonzero(has_next)
+        by_target = np.argsort(graph.target, kind="stable")  # (2M,) slots by their event
+        start = np.zeros(n_events + 2, dtype=np.int64)  # (E+2,) event e's: start[e]:start[e+1]
+        np.cumsum(np.bincount(graph.target, minlength=n_events + 1), out=start[1:])
+        self._graph = (
+            chain_prev, graph.target, graph.source, graph.offset, graph.live, start, by_target,
+        )  # fmt: skip
+
+    def of(self, answer: Assignments, evaluation: Evaluation, moves: np.ndarray) -> np.ndarray:
+        """(K,) the most each of ``moves`` (K,), type flips of binding exclusive waits of
+        the single ``answer`` (its ``evaluation``), can lower the cost (a hair above, so
+        that rounding never makes a gain exceed it; 0 where it gains nothing)."""
+        if self.objective not in MONOTONE_OBJECTIVES:
+            return np.full(moves.size, np.inf)
+        evaluator, n_conflicts = self.evaluator, answer.a_first.shape[1]
         completion = evaluation.completion[0]  # (R,)
-        held = np.zeros(evaluator.n_events + 1, dtype=bool)  # (E+1,)
-        held[graph.last_event[completion >= completion.max()]] = True
-    else:
-        held = evaluator.objective_weights(objective) > 0  # (E+1,)
-    held[-1] = False  # the zero-delay slot: robots without events never change
-    critical = evaluator.critical(answer, evaluation, held)  # (E+1,)
-    slots = 2 * np.arange(answer.a_first.shape[1]) + answer.a_first[0]  # (M,)
-    return critical[graph.target[slots]]
+        if self.objective == "max_completion":
+            held = np.zeros(evaluator.n_events + 1)  # (E+1,) the robots that finish last
+            held[evaluator.graph.last_event[completion >= completion.max()]] = 1.0
+            scale = 0.0  # the maximum falls by at most the relief, where critical
+        else:
+            held = evaluator.objective_weights(self.objective)  # (E+1,)
+            scale = 1.0 / completion.size if self.objective == "avg_completion" else 1.0
+        held[-1] = 0.0  # the zero-delay slot: robots without events never change
+        critical, slope = evaluator.critical_slopes(answer, held)  # (E+1,) each
+        relief, target = _relief(
+            moves - n_conflicts, answer.a_first[0].astype(np.int64),
+            answer.following[0].astype(np.int64), evaluation.event_delay[0], *self._graph,
+        )  # fmt: skip
+        reach = np.where(critical[target], slope[target] * scale if scale else 1.0, 0.0)
+        gain = relief * reach  # (K,)
+        cost = float(evaluation.costs[self.objective][0])
+        return np.where(gain > 0, gain * (1 + 1e-9) + 1e-9 * max(1.0, abs(cost)), 0.0)
+
+
+@numba.njit(cache=True, nogil=True)
+def _relief(
+    conflicts: np.ndarray,  # (K,) int, binding exclusive waits
+    a_first: np.ndarray,  # (M,) int
+    following: np.ndarray,  # (M,) int
+    delay: np.ndarray,  # (E+1,) float, least delays
+    chain_prev: np.ndarray,  # (E,) int, previous event of the same robot, or -1
+    target: np.ndarray,  # (2M,) int
+    source: np.ndarray,  # (2, 2M) int
+    offset: np.ndarray,  # (2, 2M) float
+    live: np.ndarray,  # (2M,) bool
+    start: np.ndarray,  # (E+2,) int, slots constraining event e: by_target[start[e]:start[e+1]]
+    by_target: np.ndarray,  # (2M,) int
+) -> tuple[np.ndarray, np.ndarray]:
+    """(K,) how far each conflict's wait falls once it is following-type (see
+    _FlipBounds), and (K,) the event that waits."""
+    relief = np.empty(conflicts.size)
+    events = np.empty(conflicts.size, dtype=np.int64)
+    for i in range(conflicts.size):
+        c = conflicts[i]
+        j = 2 * c + a_first[c]  # the slot of the side passing second
+        e = target[j]
+        floor = max(0.0, delay[source[1, j]] + offset[1, j])
+        if chain_prev[e] >= 0:
+            floor = max(floor, delay[chain_prev[e]])
+        for k in range(start[e], start[e + 1]):
+            other = by_target[k]
+            c_other = other // 2
+            if other != j and live[other] and other == 2 * c_other + a_first[c_other]:
+                kind = following[c_other]
+                floor = max(floor, delay[source[kind, other]] + offset[kind, other])
+        relief[i], events[i] = max(delay[e] - floor, 0.0), e
+    return relief, events

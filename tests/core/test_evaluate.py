@@ -460,7 +460,7 @@ def test_critical_events_are_those_no_delay_of_which_leaves_the_held_events(
     least = evaluation.event_delay[0]  # (E+1,)
     held = np.zeros(least.size, dtype=bool)
     held[rng.choice(ev.n_events, size=min(n_held, ev.n_events), replace=False)] = True
-    critical = ev.critical(assignment, evaluation, held)  # (E+1,)
+    critical = ev.critical_slopes(assignment, held.astype(float))[0]  # (E+1,)
     assert critical[held].all()
     latest = ev.latest_delays(assignment, evaluation, held)
     rise = 1e-3
