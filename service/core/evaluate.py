@@ -40,7 +40,17 @@ from service.core.assignment import Assignments
 from service.core.problem import Problem
 from service.core.schemas import OBJECTIVES, Objective
 
-__all__ = ["ConstraintGraph", "Evaluation", "Evaluator", "costs_from_completion"]
+__all__ = [
+    "MONOTONE_OBJECTIVES",
+    "ConstraintGraph",
+    "Evaluation",
+    "Evaluator",
+    "costs_from_completion",
+]
+
+# Objectives that never fall when a delay rises (sync_completion, the mean completion plus
+# the spread, may: a robot delayed toward the mean narrows the spread).
+MONOTONE_OBJECTIVES: tuple[Objective, ...] = ("avg_completion", "max_completion", "avg_delay")
 
 # Least work (conflicts x samples) worth a thread of its own: below it, handing a share
 # of the samples to another thread costs more than walking them here.
@@ -634,6 +644,53 @@ class Evaluator:
         weight[self._last_event] = 1.0
         weight[-1] = 0.0  # robots with no event
         return weight
+
+    def cost_weights(
+        self, objective: Objective, evaluation: Evaluation, sample: int = 0
+    ) -> np.ndarray:
+        """(E+1,) the events whose delays the cost of ``objective`` (one of
+        MONOTONE_OBJECTIVES) reads, with their weights: :meth:`objective_weights` for the
+        sums; for max_completion 1 at the completion events of the evaluated sample's
+        robots that finish last (the maximum falls only where all of theirs fall).
+
+        Raises:
+            ValueError: ``objective`` is not one of MONOTONE_OBJECTIVES.
+        """
+        if objective not in MONOTONE_OBJECTIVES:
+            raise ValueError(f"{objective} may fall when a delay rises")
+        if objective == "max_completion":
+            completion = evaluation.completion[sample]  # (R,)
+            weights = np.zeros(self.n_events + 1)
+            weights[self._last_event[completion >= completion.max()]] = 1.0
+        else:
+            weights = self.objective_weights(objective)
+        weights[-1] = 0.0  # robots with no event never change
+        return weights
+
+    def critical_waits(
+        self,
+        assignment: Assignments,
+        evaluation: Evaluation,
+        objective: Objective,
+        latest: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """(M,) bool: of a single acyclic assignment (its ``evaluation``), the conflicts
+        whose constraint acts on an event critical (:meth:`critical_slopes`) to the events
+        the cost of ``objective`` (one of MONOTONE_OBJECTIVES) reads: a move (reversing a
+        conflict or flipping its type) takes one constraint out and puts one in, and only
+        taking one out of such an event can lower that cost. ``latest`` (E+1,): the
+        latest delays holding those events (:meth:`latest_delays`), where the caller has
+        them; else found here.
+
+        Raises:
+            ValueError: the assignment's constraint graph has a cycle.
+        """
+        if latest is None:
+            held = self.cost_weights(objective, evaluation) > 0  # (E+1,)
+            latest = self.latest_delays(assignment, evaluation, held)
+        critical = latest <= evaluation.event_delay[0] + self._tight  # (E+1,)
+        slots = 2 * np.arange(assignment.a_first.shape[1]) + assignment.a_first[0]  # (M,)
+        return critical[self._target[slots]]
 
     def latest_delays(
         self, assignments: Assignments, evaluation: Evaluation, held: np.ndarray, sample: int = 0

@@ -39,14 +39,13 @@ import numpy as np
 
 from service.core.assignment import Assignments
 from service.core.decode import Decoder
-from service.core.evaluate import Evaluation, Evaluator
+from service.core.evaluate import MONOTONE_OBJECTIVES, Evaluation, Evaluator
 from service.core.incremental import IncrementalEvaluator, apply_moves
 from service.core.orientation import OrientationGraph
 from service.core.schemas import Objective
 
 __all__ = [
     "FLIPS_PER_ROUND",
-    "MONOTONE_OBJECTIVES",
     "REFIT_ROUNDS",
     "descend_types",
     "refit_types",
@@ -67,9 +66,6 @@ FLIPS_PER_ROUND = 8
 # throughout slow the unbounded descent of sync_completion, while the bounded ones mostly
 # stop within 16-48 flips (session 46).
 COSTED_PER_CHECK = 64
-# Objectives that never fall when a delay rises (sync_completion, the mean completion plus
-# the spread, may: a robot delayed toward the mean narrows the spread).
-MONOTONE_OBJECTIVES: tuple[Objective, ...] = ("avg_completion", "max_completion", "avg_delay")
 
 
 def updated_pair_times(
@@ -259,21 +255,19 @@ class _FlipBounds:
         if self.objective not in MONOTONE_OBJECTIVES:
             return np.full(moves.size, np.inf)
         evaluator, n_conflicts = self.evaluator, answer.a_first.shape[1]
-        completion = evaluation.completion[0]  # (R,)
-        if self.objective == "max_completion":
-            held = np.zeros(evaluator.n_events + 1)  # (E+1,) the robots that finish last
-            held[evaluator.graph.last_event[completion >= completion.max()]] = 1.0
-            scale = 0.0  # the maximum falls by at most the relief, where critical
-        else:
-            held = evaluator.objective_weights(self.objective)  # (E+1,)
-            scale = 1.0 / completion.size if self.objective == "avg_completion" else 1.0
-        held[-1] = 0.0  # the zero-delay slot: robots without events never change
+        held = evaluator.cost_weights(self.objective, evaluation)  # (E+1,)
         critical, slope = evaluator.critical_slopes(answer, held)  # (E+1,) each
         relief, target = _relief(
             moves - n_conflicts, answer.a_first[0].astype(np.int64),
             answer.following[0].astype(np.int64), evaluation.event_delay[0], *self._graph,
         )  # fmt: skip
-        reach = np.where(critical[target], slope[target] * scale if scale else 1.0, 0.0)
+        if self.objective == "max_completion":  # the maximum falls by the relief at most
+            reach = critical[target].astype(np.float64)  # (K,)
+        else:  # the weight those paths reach, of the sum's (avg_delay) or the mean's
+            per = (
+                1.0 / evaluation.completion.shape[1] if self.objective == "avg_completion" else 1.0
+            )
+            reach = np.where(critical[target], slope[target] * per, 0.0)  # (K,)
         gain = relief * reach  # (K,)
         cost = float(evaluation.costs[self.objective][0])
         return np.where(gain > 0, gain * (1 + 1e-9) + 1e-9 * max(1.0, abs(cost)), 0.0)

@@ -474,6 +474,43 @@ def test_critical_events_are_those_no_delay_of_which_leaves_the_held_events(
             assert latest[e] > least[e] and raised.max() == pytest.approx(0.0, abs=1e-9)
 
 
+@settings(max_examples=30, deadline=None)
+@given(
+    seed=st.integers(0, 10_000),
+    stitched=st.booleans(),
+    objective=st.sampled_from(evaluate.MONOTONE_OBJECTIVES),
+)
+def test_no_move_of_a_conflict_whose_wait_is_not_critical_lowers_the_cost(
+    seed: int, stitched: bool, objective: str
+) -> None:
+    """Reversing a conflict or flipping its type lowers a cost of MONOTONE_OBJECTIVES only
+    where its wait is critical to what the cost reads (full evaluation of both moves of
+    every other conflict; moves that close a cycle cost inf)."""
+    problem = _problem(stitched_problem(seed, 10, 3.0) if stitched else small_problem(seed))
+    assignment = _decoded(problem, seed)
+    ev = Evaluator(problem)
+    evaluation = ev.evaluate(assignment)
+    critical = ev.critical_waits(assignment, evaluation, objective)  # (M,)
+    others = np.flatnonzero(~critical)  # (K,)
+    cost = float(evaluation.costs[objective][0])
+    for flip_type in (False, True):
+        a_first = np.repeat(assignment.a_first, others.size, axis=0)  # (K, M)
+        following = np.repeat(assignment.following, others.size, axis=0)
+        changed = following if flip_type else a_first
+        changed[np.arange(others.size), others] ^= True
+        costs = ev.evaluate(Assignments(a_first, following)).costs[objective]  # (K,)
+        assert np.all(costs >= cost - 1e-9 * max(1.0, abs(cost)))
+
+
+def test_cost_weights_refuse_sync_completion() -> None:
+    """The spread of sync_completion may fall when a delay rises: no critical events."""
+    problem = _problem(small_problem(0))
+    ev = Evaluator(problem)
+    assignment = _decoded(problem, 0)
+    with pytest.raises(ValueError, match="may fall"):
+        ev.cost_weights("sync_completion", ev.evaluate(assignment))
+
+
 @settings(max_examples=30, deadline=None, derandomize=True)
 @given(seed=st.integers(0, 10_000), stitched=st.booleans())
 def test_slopes_bound_what_a_push_past_the_latest_raises(seed: int, stitched: bool) -> None:
