@@ -98,6 +98,15 @@ __all__ = [
     "reinsert_search",
 ]
 
+# Whether a robot's partners are drawn by the waits critical to the cost (binding ones from
+# which a path of tight constraints leads to an event the cost reads) rather than by every
+# binding wait: a wait no completion depends on gains nothing when repaired. Measured
+# (session 46, `python -m bench.ab --b service.solvers.reinsert.CRITICAL_BLOCKING=False`,
+# ``auto``, avg_completion, two-way and two-lane warehouses of 100 and 250 robots, one-way
+# and mixed of 250, two seeds): 1 s 0.9709 / 0.9651 (19 cheaper, 17 dearer of 36), on other
+# worlds 0.9699 / 0.9679 (20 / 16); 5 s 0.9722 / 0.9657 (14 / 10 of 24). By family the
+# sign varies from one set of worlds to the next (two-way 100: 1 / 5, then 4 / 2).
+CRITICAL_BLOCKING = True
 # Objectives a repair's part of the cost stands for (sums over robots; measured for both,
 # see ``portfolio.REINSERT_SHARE``).
 REINSERT_OBJECTIVES = ("avg_completion", "avg_delay")
@@ -819,8 +828,20 @@ class _Incumbent:
             np.argsort(np.argsort(pos, kind="stable")).astype(np.float64),
             counts,
             evaluation.completion[0] - ctx.problem.free_time(),
-            ctx.evaluator.binding(answer, evaluation),
+            _blocking(ctx, answer, evaluation, latest),
         )
+
+
+def _blocking(
+    ctx: SolveContext, answer: Assignments, evaluation: Evaluation, latest: np.ndarray
+) -> np.ndarray:
+    """(M,) bool: the conflicts of ``answer`` whose wait binds and, with CRITICAL_BLOCKING,
+    is critical to what the cost reads (``latest`` (E+1,): its latest delays holding
+    those events; :meth:`~service.core.evaluate.Evaluator.critical_waits`)."""
+    binding = ctx.evaluator.binding(answer, evaluation)  # (M,)
+    if not CRITICAL_BLOCKING:
+        return binding
+    return binding & ctx.evaluator.critical_waits(answer, evaluation, ctx.objective, latest)
 
 
 def reinsert_search(
