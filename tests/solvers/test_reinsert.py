@@ -572,3 +572,22 @@ def test_the_first_neighbourhoods_follow_the_fleet(
     config = reinsert.ReinsertConfig(fleet_share=share, max_robots=32)
     reinsert.reinsert_search(ctx, plain_start(ctx), np.inf, 0, config, max_steps=1)
     assert counts == [first]
+
+
+@settings(max_examples=30, deadline=None, suppress_health_check=SLOW)
+@given(ctx=CONTEXTS, critical=st.booleans())
+def test_partners_are_drawn_by_the_critical_binding_waits(
+    ctx: SolveContext, critical: bool
+) -> None:
+    """An incumbent's blocking conflicts are its binding waits critical to the cost (from
+    the latest delays the search keeps), found anew by the evaluator; every binding wait
+    without CRITICAL_BLOCKING."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(reinsert, "CRITICAL_BLOCKING", critical)
+        current = _incumbent(ctx)
+    answer = Assignments.single(current.a_first, current.following)
+    evaluation = ctx.evaluator.evaluate(answer)
+    expected = ctx.evaluator.binding(answer, evaluation)
+    if critical:
+        expected &= ctx.evaluator.critical_waits(answer, evaluation, ctx.objective)
+    np.testing.assert_array_equal(current.blocking, expected)
