@@ -133,6 +133,14 @@ MAX_ROBOTS = 40
 # (5 / 7); the conformance sets and 25-50-robot worlds the same at 5 s (26 / 26 runs
 # proven) and at 1 s (0.9975 / 0.9972, 31 / 30 proven).
 BLOCKING_WEIGHT = 3.0
+# Whether only the binding waits that hold up what the objective reads (critical: their
+# latest delay is their least) pair robots there (a wait no robot's part depends on gains
+# nothing when freed). Measured (session 46, `python -m bench.ab --b
+# service.solvers.lns.CRITICAL_WAITS=False`, ``auto`` at 5 s, avg_completion): warehouses
+# of 100 robots (two-way, two-lane, one-way, mixed; three worlds, two seeds) 0.9770 /
+# 0.9732 (14 cheaper, 10 dearer of 24); two-way and two-lane of 250 (two worlds) 4 / 0;
+# the sets wh_50 and wh_100 even (4 / 4 proven).
+CRITICAL_WAITS = True
 # Time limit of one sub-problem; most are proven optimal well within it at 100 robots.
 SUB_TIME_S = 0.3
 # CP-SAT's presolve of a sub-problem took most of its time (0.1-0.2 s of domain
@@ -280,16 +288,17 @@ class _Incumbent:
         on_grid = fleet.grid.evaluate(answer)
         grid = np.rint(on_grid.event_delay[0] * fleet.scale).astype(np.int64)
         latest = fleet.grid.latest_delays(answer, on_grid, fleet.held)  # (E+1,) inf: unbounded
+        grid_latest = np.rint(np.minimum(latest * fleet.scale, fleet.horizon)).astype(np.int64)
         return cls(
             a_first,
             following,
             float(evaluation.costs[ctx.objective][0]),
             evaluation.completion[0] - ctx.problem.free_time(),
             grid,
-            np.rint(np.minimum(latest * fleet.scale, fleet.horizon)).astype(np.int64),
+            grid_latest,
             rank,
             counts,
-            _binding_waits(fleet, a_first, following, grid),
+            _binding_waits(fleet, a_first, following, grid, grid_latest),
         )
 
     @classmethod
@@ -302,15 +311,23 @@ class _Incumbent:
 
 
 def _binding_waits(
-    fleet: _Fleet, a_first: np.ndarray, following: np.ndarray, grid_delay: np.ndarray
+    fleet: _Fleet,
+    a_first: np.ndarray,
+    following: np.ndarray,
+    grid_delay: np.ndarray,
+    grid_latest: np.ndarray,
 ) -> csr_array:
     """(R, R) symmetric: the slots of an answer (directions ``a_first``, types
-    ``following`` (M,)) whose wait sets their robot's delay (``grid_delay`` (E+1,)): the
-    robots that hold each other up now, whom a neighbourhood should free together."""
+    ``following`` (M,)) whose wait sets their robot's delay (``grid_delay`` (E+1,)) and,
+    with CRITICAL_WAITS, holds up what the objective reads (its event's latest delay
+    ``grid_latest`` (E+1,) is its least): the robots that hold each other up now, whom a
+    neighbourhood should free together."""
     s = fleet.slots
     waited = grid_delay[s.target]
     binding = s.active(a_first, following) & (waited > 0)
     binding &= waited == grid_delay[s.source] + s.offset  # (S,)
+    if CRITICAL_WAITS:
+        binding &= grid_latest[s.target] <= waited
     waiter, blocker = fleet.slot_robots[binding].T
     n = fleet.event_start.size - 1
     pairs = coo_array((np.ones(waiter.size), (waiter, blocker)), shape=(n, n))

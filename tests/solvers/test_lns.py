@@ -207,6 +207,35 @@ def test_every_waiting_robot_has_a_binding_wait_with_a_robot_it_meets(
     assert np.array_equal(delayed & waits.any(axis=1), delayed)
 
 
+@settings(max_examples=20, deadline=None, derandomize=True)
+@given(
+    family=st.sampled_from(["small", "stitched", "conformance"]),
+    seed=st.integers(0, 10_000),
+    robots=st.integers(3, 30),
+)
+def test_only_critical_binding_waits_pair_robots(family: str, seed: int, robots: int) -> None:
+    """With CRITICAL_WAITS the pairs are those of the binding waits whose event's latest
+    delay (holding each robot's part) is its least: a subset of every binding wait's."""
+    ctx = _context(_request(family, seed, robots), "avg_completion")
+    fleet = lns._Fleet.of(ctx)
+    start = plain_start(ctx)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(lns, "CRITICAL_WAITS", False)
+        every = lns._Incumbent.start(ctx, fleet, start).waits.toarray() > 0  # (R, R)
+    current = lns._Incumbent.start(ctx, fleet, start)
+    critical = current.waits.toarray() > 0
+    assert not (critical & ~every).any()
+    s = fleet.slots
+    waited = current.grid_delay[s.target]
+    binding = s.active(current.a_first, current.following) & (waited > 0)
+    binding &= waited == current.grid_delay[s.source] + s.offset
+    binding &= current.grid_latest[s.target] <= waited  # (S,)
+    expected = np.zeros_like(critical)
+    waiter, blocker = fleet.slot_robots[binding].T
+    expected[waiter, blocker] = expected[blocker, waiter] = True
+    np.testing.assert_array_equal(critical, expected)
+
+
 @pytest.mark.parametrize("objective", lns.LNS_OBJECTIVES)
 @pytest.mark.parametrize("seed", range(12))
 def test_freeing_every_robot_reaches_the_brute_force_optimum(
