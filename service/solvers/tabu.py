@@ -15,10 +15,7 @@ list holds the moves of *binding* conflicts first (those whose constraint is
 what makes a robot wait, :meth:`Evaluator.binding`, the analogue of a
 critical-path neighbourhood in job-shop scheduling), then random moves: on 12
 stitched problems of 50-250 robots this lowered the cost reached on every one
-of them against a purely random list. For the objectives that never fall when a delay
-rises (sums and the maximum) the binding conflicts whose wait is critical to what the cost
-reads (:meth:`Evaluator.critical_waits`, the job-shop critical path proper: only their
-moves can lower the cost) come before the other binding ones (CRITICAL_FIRST).
+of them against a purely random list.
 
 Tabu rule: after a move on conflict e, every move on e is tabu for
 ``tenure + U{0..tenure_spread}`` iterations (a randomized tenure avoids
@@ -36,20 +33,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from service.core.assignment import Assignments
-from service.core.evaluate import MONOTONE_OBJECTIVES, Evaluation
 from service.core.incremental import IncrementalEvaluator, apply_moves
 from service.solvers.fcfs import cheapest_blend
 from service.solvers.registry import SolveContext, SolverOutput, register
 
-__all__ = ["CRITICAL_FIRST", "TabuConfig", "tabu", "tabu_search"]
-
-# Whether the candidate list puts the critical binding conflicts before the other binding
-# ones (see the module). Measured (session 46, `python -m bench.ab --b
-# service.solvers.tabu.CRITICAL_FIRST=False`, ``auto`` on generated warehouses and floors of
-# 25-250 robots, two worlds a kind, two seeds; docs/benchmarks.md): max_completion 1 s
-# 0.9783 / 0.9749 (16 cheaper, 7 dearer of 40), 5 s 0.9780 / 0.9741 (17 / 11);
-# avg_completion 1 s on 25-50 robots and the conformance sets 0.9981 / 0.9975 (3 / 2).
-CRITICAL_FIRST = True
+__all__ = ["TabuConfig", "tabu", "tabu_search"]
 
 
 @dataclass(frozen=True)
@@ -64,47 +52,22 @@ class TabuConfig:
 
 
 def _candidates(
-    rng: np.random.Generator, tiers: tuple[np.ndarray, ...], movable: np.ndarray, size: int
+    rng: np.random.Generator, binding: np.ndarray, movable: np.ndarray, size: int
 ) -> np.ndarray:
-    """The candidate list: both moves of the conflicts of each tier in turn (a random
-    subset of the tier that no longer fits), random moves to fill it.
+    """The candidate list: both moves of binding conflicts first, random moves to fill it.
 
     Only ``movable`` moves are drawn (reversing a fixed direction is not), so fixed
     conflicts do not crowd the list with moves that can never be taken.
-    Shapes: tiers (B_i,) distinct conflict indices each, movable (2M,) bool -> (<= size,)
-    distinct moves.
+    Shapes: binding (B,) conflict indices, movable (2M,) bool -> (<= size,) distinct moves.
     """
     n_conf = movable.size // 2
-    taken: list[np.ndarray] = []
-    left = size
-    for tier in tiers:
-        if not left:
-            break
-        focused = np.concatenate([tier, tier + n_conf])  # (2B_i,)
-        focused = focused[movable[focused]]
-        taken.append(
-            rng.choice(focused, size=left, replace=False) if focused.size >= left else focused
-        )
-        left -= taken[-1].size
-    chosen = np.concatenate(taken)
-    if left:
-        rest = np.setdiff1d(np.flatnonzero(movable), chosen)
-        chosen = np.concatenate(
-            [chosen, rng.choice(rest, size=min(left, rest.size), replace=False)]
-        )
-    return chosen
-
-
-def _tiers(
-    ctx: SolveContext, current: Assignments, evaluation: Evaluation
-) -> tuple[np.ndarray, ...]:
-    """The binding conflicts of ``current`` (its ``evaluation``), the critical ones first
-    where the objective allows (see CRITICAL_FIRST) -> tiers of conflict indices."""
-    binding = ctx.evaluator.binding(current, evaluation)  # (M,)
-    if not CRITICAL_FIRST or ctx.objective not in MONOTONE_OBJECTIVES:
-        return (np.flatnonzero(binding),)
-    critical = binding & ctx.evaluator.critical_waits(current, evaluation, ctx.objective)
-    return np.flatnonzero(critical), np.flatnonzero(binding & ~critical)
+    focused = np.concatenate([binding, binding + n_conf])  # (2B,)
+    focused = focused[movable[focused]]
+    if focused.size >= size:
+        return rng.choice(focused, size=size, replace=False)
+    rest = np.setdiff1d(np.flatnonzero(movable), focused, assume_unique=True)
+    fill = rng.choice(rest, size=min(size - focused.size, rest.size), replace=False)
+    return np.concatenate([focused, fill])
 
 
 def tabu_search(
@@ -132,7 +95,7 @@ def tabu_search(
     current = best = start
     evaluation = evaluate(start)
     best_cost = float(evaluation.costs[ctx.objective][0])
-    tiers = _tiers(ctx, start, evaluation)  # conflicts making waits
+    binding = np.flatnonzero(ctx.evaluator.binding(start, evaluation))  # conflicts making waits
     counts = ctx.cliques.following_counts(start.following)[0]  # (Q,) kept move by move
     tabu_until = np.zeros(ctx.problem.n_conflicts, dtype=np.int64)  # (M,) first free iteration
     stale, it = 0, 0
@@ -141,7 +104,7 @@ def tabu_search(
             break
         it += 1
         stale += 1
-        moves = _candidates(rng, tiers, movable, cfg.moves)
+        moves = _candidates(rng, binding, movable, cfg.moves)
         moves = moves[graph.feasible(current.a_first[0], current.following[0], moves, counts)]
         if moves.size == 0:
             continue
@@ -156,7 +119,7 @@ def tabu_search(
         if moves[k] >= ctx.problem.n_conflicts:  # a type move
             graph.count_type_move(counts, conflict[k], bool(current.following[0, conflict[k]]))
         evaluation = evaluate(current)  # the next base: its least delays and binding conflicts
-        tiers = _tiers(ctx, current, evaluation)
+        binding = np.flatnonzero(ctx.evaluator.binding(current, evaluation))
         tabu_until[conflict[k]] = it + cfg.tenure + rng.integers(cfg.tenure_spread + 1)
         cost = float(evaluation.costs[ctx.objective][0])
         if cost < best_cost:

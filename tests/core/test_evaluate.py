@@ -406,6 +406,15 @@ def test_only_binding_conflicts_hold_robots_back(seed: int) -> None:
         np.testing.assert_allclose(dropped.completion, evaluation.completion, rtol=1e-12)
 
 
+def _walked(seed: int, stitched: bool) -> tuple[Problem, Assignments, Evaluator, Evaluation]:
+    """A stitched problem of 10 robots (or a small one), a decoded assignment of it, an
+    evaluator and its evaluation."""
+    problem = _problem(stitched_problem(seed, 10, 3.0) if stitched else small_problem(seed))
+    assignment = _decoded(problem, seed)
+    ev = Evaluator(problem)
+    return problem, assignment, ev, ev.evaluate(assignment)
+
+
 def _walk_with_floor(problem: Problem, assignment: Assignments, floor: np.ndarray) -> np.ndarray:
     """(E+1,) least delays of one assignment with each event's delay at least ``floor``."""
     ev = Evaluator(problem)
@@ -422,12 +431,8 @@ def test_latest_delays_are_the_latest_that_keep_the_held_events(seed: int, stitc
     """Held events (here completions) keep their least delays; any other event delayed
     up to its latest (a floor on it, the rest walked again) leaves every held event where
     it was, and a second past it raises one (or it has no latest: inf)."""
-    request = stitched_problem(seed, 10, 3.0) if stitched else small_problem(seed)
-    problem = _problem(request)
+    problem, assignment, ev, evaluation = _walked(seed, stitched)
     rng = np.random.default_rng(seed)
-    assignment = _decoded(problem, seed)
-    ev = Evaluator(problem)
-    evaluation = ev.evaluate(assignment)
     least = evaluation.event_delay[0]  # (E+1,)
     held = np.zeros(least.size, dtype=bool)
     held[ev.graph.last_event] = True
@@ -452,11 +457,8 @@ def test_critical_events_are_those_no_delay_of_which_leaves_the_held_events(
     """An event is critical to some held events exactly when any rise of its delay (a
     floor on it, the rest walked again) raises one of them by as much; the others can
     rise a little and leave every held event where it was."""
-    problem = _problem(stitched_problem(seed, 10, 3.0) if stitched else small_problem(seed))
+    problem, assignment, ev, evaluation = _walked(seed, stitched)
     rng = np.random.default_rng(seed)
-    assignment = _decoded(problem, seed)
-    ev = Evaluator(problem)
-    evaluation = ev.evaluate(assignment)
     least = evaluation.event_delay[0]  # (E+1,)
     held = np.zeros(least.size, dtype=bool)
     held[rng.choice(ev.n_events, size=min(n_held, ev.n_events), replace=False)] = True
@@ -486,10 +488,7 @@ def test_no_move_of_a_conflict_whose_wait_is_not_critical_lowers_the_cost(
     """Reversing a conflict or flipping its type lowers a cost of MONOTONE_OBJECTIVES only
     where its wait is critical to what the cost reads (full evaluation of both moves of
     every other conflict; moves that close a cycle cost inf)."""
-    problem = _problem(stitched_problem(seed, 10, 3.0) if stitched else small_problem(seed))
-    assignment = _decoded(problem, seed)
-    ev = Evaluator(problem)
-    evaluation = ev.evaluate(assignment)
+    _, assignment, ev, evaluation = _walked(seed, stitched)
     critical = ev.critical_waits(assignment, evaluation, objective)  # (M,)
     others = np.flatnonzero(~critical)  # (K,)
     cost = float(evaluation.costs[objective][0])

@@ -200,6 +200,19 @@ def test_types_by_descent_stop_within_a_round_once_the_deadline_passes(
     assert rounds == 0 and not found.following[0][problem.fixed_type < 0].any()
 
 
+def _round(seed: int, draw: int, objective: str) -> tuple:
+    """What a round of the descent starts from on a stitched problem (seed): (problem,
+    orientation, evaluator, a random valid answer with some following-type conflicts, its
+    evaluation, the flips the round lists)."""
+    problem, cliques, decoder, evaluator = _setup(seed)
+    start = _some_following(_random_start(decoder, problem, draw), draw)
+    orientation = OrientationGraph(problem, cliques)
+    evaluation = evaluator.evaluate(start)
+    may = (problem.fixed_type < 0) & ~cliques.forbidden()  # (M,)
+    listed = retype._type_flips(orientation, evaluator, start, evaluation, may, objective)
+    return problem, orientation, evaluator, start, evaluation, listed
+
+
 @settings(max_examples=30, deadline=None)
 @given(
     seed=STARTS["seed"],
@@ -213,12 +226,7 @@ def test_the_flips_a_descent_leaves_uncosted_are_never_cheaper(
     a round of the descent does not list (following made exclusive, waits that do not bind
     or hold up nothing the cost reads) costs at least as much by full evaluation, from
     any valid answer (decoded types, some following-type)."""
-    problem, cliques, decoder, evaluator = _setup(seed)
-    start = _some_following(_random_start(decoder, problem, draw), draw)
-    orientation = OrientationGraph(problem, cliques)
-    evaluation = evaluator.evaluate(start)
-    may = (problem.fixed_type < 0) & ~cliques.forbidden()  # (M,)
-    listed = retype._type_flips(orientation, evaluator, start, evaluation, may, objective)
+    problem, orientation, evaluator, start, evaluation, listed = _round(seed, draw, objective)
     every = problem.n_conflicts + np.arange(problem.n_conflicts)  # (M,)
     unlisted = np.setdiff1d(
         every[orientation.feasible(start.a_first[0], start.following[0], every)], listed
@@ -239,12 +247,7 @@ def test_no_flip_gains_more_than_its_bound(seed: int, draw: int, objective: str)
     """What each listed flip lowers the cost by (full evaluation) is at most its bound,
     the bound by which a round leaves flips uncosted; a bound is zero only where its flip
     gains nothing."""
-    problem, cliques, decoder, evaluator = _setup(seed)
-    start = _some_following(_random_start(decoder, problem, draw), draw)
-    orientation = OrientationGraph(problem, cliques)
-    evaluation = evaluator.evaluate(start)
-    may = (problem.fixed_type < 0) & ~cliques.forbidden()  # (M,)
-    moves = retype._type_flips(orientation, evaluator, start, evaluation, may, objective)
+    _, _, evaluator, start, evaluation, moves = _round(seed, draw, objective)
     bounds = retype._FlipBounds(evaluator, objective).of(start, evaluation, moves)  # (K,)
     if not moves.size:
         return

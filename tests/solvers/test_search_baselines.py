@@ -32,7 +32,7 @@ from service.solvers.priority import (
     shifted_flips,
 )
 from service.solvers.registry import SolveContext
-from service.solvers.tabu import TabuConfig, _candidates, tabu, tabu_search
+from service.solvers.tabu import TabuConfig, tabu, tabu_search
 from tests.reference import feasible_assignments, fix_directions, reference_problem, tiny_request
 from tests.solvers.common import context, cost
 from tests.worlds import world_request
@@ -275,18 +275,3 @@ def test_tabu_search_without_time_builds_nothing_and_returns_its_start() -> None
     found, found_cost, iterations = tabu_search(ctx, start.assignment, budget_s=0.0)
     assert found is start.assignment and iterations == 0 and "orientation" not in ctx.__dict__
     assert found_cost == cost(ctx, start)
-
-
-def test_tabu_candidates_take_each_tier_before_the_next() -> None:
-    """Both moves of every conflict of the first tier come first where they fit, then a
-    random part of the next tier, no random filler; fixed moves never."""
-    movable = np.ones(2 * 20, dtype=bool)  # (2M,), M = 20
-    movable[[3, 20 + 4]] = False  # conflict 3 may not turn, conflict 4 keeps its type
-    rng = np.random.default_rng(0)
-    first, second = np.array([1, 3, 4]), np.arange(5, 20)
-    moves = _candidates(rng, (first, second), movable, 10)
-    assert moves.size == 10 and np.unique(moves).size == 10 and movable[moves].all()
-    assert set(moves[:4].tolist()) == {1, 4, 21, 23}
-    assert set((moves[4:] % 20).tolist()) <= set(second.tolist())
-    everything = _candidates(rng, (first,), movable, 50)  # the rest filled at random
-    assert everything.size == 38 and set(everything[:4].tolist()) == {1, 4, 21, 23}
