@@ -688,9 +688,14 @@ class Evaluator:
         if latest is None:
             held = self.cost_weights(objective, evaluation) > 0  # (E+1,)
             latest = self.latest_delays(assignment, evaluation, held)
-        critical = latest <= evaluation.event_delay[0] + self._tight  # (E+1,)
+        critical = self._at_least(latest, evaluation.event_delay[0])  # (E+1,)
         slots = 2 * np.arange(assignment.a_first.shape[1]) + assignment.a_first[0]  # (M,)
         return critical[self._target[slots]]
+
+    def _at_least(self, latest: np.ndarray, least: np.ndarray) -> np.ndarray:
+        """(E+1,) bool: the events whose ``latest`` delay is their ``least`` (to rounding):
+        the critical ones."""
+        return latest <= least + self._tight
 
     def latest_delays(
         self, assignments: Assignments, evaluation: Evaluation, held: np.ndarray, sample: int = 0
@@ -729,7 +734,7 @@ class Evaluator:
         evaluation, latest = self.evaluate_with_latest(assignment, held, slope)
         if latest is None:
             raise ValueError("the assignment's constraint graph has a cycle")
-        return latest <= evaluation.event_delay[0] + self._tight, slope
+        return self._at_least(latest, evaluation.event_delay[0]), slope
 
     def evaluate_with_latest(
         self, assignment: Assignments, held: np.ndarray, slope: np.ndarray | None = None
