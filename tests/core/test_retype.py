@@ -209,7 +209,8 @@ def _round(seed: int, draw: int, objective: str) -> tuple:
     orientation = OrientationGraph(problem, cliques)
     evaluation = evaluator.evaluate(start)
     may = (problem.fixed_type < 0) & ~cliques.forbidden()  # (M,)
-    listed = retype._type_flips(orientation, evaluator, start, evaluation, may, objective)
+    counts = cliques.following_counts(start.following)[0]  # (Q,)
+    listed = retype._type_flips(orientation, evaluator, start, evaluation, may, objective, counts)
     return problem, orientation, evaluator, start, evaluation, listed
 
 
