@@ -104,6 +104,13 @@ class ConstraintGraph:
     last_event: np.ndarray  # (R,) each robot's completion event (E: none)
     delay_weight: np.ndarray  # (E+1,) avg_delay = event delays @ delay_weight
 
+    def chain_prev(self) -> np.ndarray:
+        """(E,) each event's previous event of the same robot, or -1."""
+        prev = np.full(self.chain_next.size, -1, dtype=np.int64)
+        has_next = self.chain_next >= 0
+        prev[self.chain_next[has_next]] = np.flatnonzero(has_next)
+        return prev
+
 
 def costs_from_completion(completion: np.ndarray) -> dict[str, np.ndarray]:
     """avg, max and sync completion from (S, R) completion times -> (S,) each, a row's

@@ -372,10 +372,7 @@ class IncrementalEvaluator:
         problem = evaluator.problem
         n_events = evaluator.n_events
         graph = evaluator.graph
-        chain_next = graph.chain_next  # (E,)
-        chain_prev = np.full(n_events, -1, dtype=np.int64)  # (E,) previous event of the robot
-        has_next = chain_next >= 0
-        chain_prev[chain_next[has_next]] = np.flatnonzero(has_next)
+        chain_next, chain_prev = graph.chain_next, graph.chain_prev()  # (E,) each
         last_robot = np.full(n_events + 1, -1, dtype=np.int64)  # (E+1,) robot ending there
         last_robot[graph.last_event] = np.arange(problem.n_robots)
         last_robot[n_events] = -1  # robots without events never change

@@ -254,14 +254,12 @@ class _FlipBounds:
         graph = evaluator.graph
         self.evaluator, self.objective = evaluator, objective
         n_events = evaluator.n_events
-        chain_prev = np.full(n_events, -1, dtype=np.int64)  # (E,) previous event of the robot
-        has_next = graph.chain_next >= 0
-        chain_prev[graph.chain_next[has_next]] = np.flatnonzero(has_next)
         by_target = np.argsort(graph.target, kind="stable")  # (2M,) slots by their event
         start = np.zeros(n_events + 2, dtype=np.int64)  # (E+2,) event e's: start[e]:start[e+1]
         np.cumsum(np.bincount(graph.target, minlength=n_events + 1), out=start[1:])
         self._graph = (
-            chain_prev, graph.target, graph.source, graph.offset, graph.live, start, by_target,
+            graph.chain_prev(), graph.target, graph.source, graph.offset, graph.live, start,
+            by_target,
         )  # fmt: skip
 
     def of(self, answer: Assignments, evaluation: Evaluation, moves: np.ndarray) -> np.ndarray:
