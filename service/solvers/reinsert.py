@@ -165,6 +165,20 @@ FLEET_SHARE = 1 / 16
 # tuned on (wh_one_way, wh_mixed, wh_parked 100) 1 s 0.9737 / 0.9707 (9 / 9). Fleets of
 # 104 robots and more take FLEET_SHARE.
 ROBOTS = 6
+# Neighbourhoods grow on a stall up to this share of the fleet (and max_robots, 32). While
+# annealing is hot nearly every step counts as a stall (a dearer repair kept improves on no
+# best), so every turn's neighbourhoods soon reached 32 robots: a third of a 100-robot fleet,
+# whose greedy repairs are rough and slow. Measured (session 47, ``python -m bench.ab``,
+# ``auto``, avg_completion, 1 s unless said, the share against 1.0, i.e. growth to 32):
+# wh_two_way, wh_two_lane, wh_one_way, wh_mixed, wh_parked of 100 robots and wh_two_way,
+# wh_two_lane of 50 (three worlds, two seeds) 0.9568 -> 0.9863 at 1/8 (33 cheaper, 8
+# dearer of 42; two-way 100 0.926 -> 0.968, parked 100 0.935 -> 0.995, two-lane 100 even);
+# growth to 16 at 250 robots (their first size: no growth) 0.8757 / 0.9353 -> 0.8727 /
+# 0.9196 (two-way / two-lane); no growth at all against 1/8 (100 and 250 robots) 0.9352
+# against 0.9585 (8 / 24); 1/5 against 1/8 even (0.9840 / 0.9844); 5 s, 100 and 250 robots,
+# two sets of worlds 0.9775 / 0.9835 (9 / 7) and 0.9943 / 0.9780 (11 / 5); avg_delay see
+# docs/benchmarks.md ("Neighbourhoods that stop growing", session 47).
+MAX_SHARE = 1 / 8
 
 
 # Repairs of an order tried again where a robot had no passage, each with that robot put
@@ -202,10 +216,12 @@ class ReinsertConfig:
     # its repair is. See HOT_ORDERS.
     hot_orders: int = HOT_ORDERS
     # After steps without improvement that together freed stall_cover times the fleet,
-    # neighbourhoods grow by ``growth`` (up to max_robots), as in LNS.
+    # neighbourhoods grow by ``growth`` (up to max_robots and max_share of the fleet, never
+    # below where they start), as in LNS. See MAX_SHARE.
     stall_cover: float = 1.0
     growth: float = 1.5
     max_robots: int = 32
+    max_share: float = MAX_SHARE
     blocking_weight: float = 10.0  # a binding wait against 1 per shared conflict
     # Steps without improvement, each re-inserting the whole fleet (in ``orders`` random
     # orders), after which the search ends (None: never): only fleets of up to
@@ -223,7 +239,8 @@ class ReinsertConfig:
     push: float = PUSH
 
 
-SOLVER_CONFIG = ReinsertConfig(whole_fleet_plateau=64)  # the ``reinsert`` solver's
+# The ``reinsert`` solver's: small fleets grow to the whole fleet, where it stops.
+SOLVER_CONFIG = ReinsertConfig(whole_fleet_plateau=64, max_share=1.0)
 
 
 class ReinsertResult(NamedTuple):
@@ -877,6 +894,7 @@ def reinsert_search(
     n_robots, steps = ctx.problem.n_robots, 0
     count = max(config.robots, min(round(config.fleet_share * n_robots), config.max_robots))
     count, stalled = min(count, n_robots), 0
+    most = max(count, min(round(config.max_share * n_robots), config.max_robots, n_robots))
     warm_from, cold_at = (time.monotonic(), deadline) if cooling is None else cooling
     while time.monotonic() < deadline and (max_steps is None or steps < max_steps):
         if not (current.robot_delay > TOL).any():
@@ -885,7 +903,7 @@ def reinsert_search(
         if count == n_robots and plateau is not None and stalled >= plateau:
             break
         if count < n_robots and stalled * count >= config.stall_cover * n_robots:
-            count, stalled = min(int(count * config.growth) + 1, config.max_robots, n_robots), 0
+            count, stalled = min(int(count * config.growth) + 1, most), 0
         picked = _pick(
             st, count, np.maximum(current.robot_delay, 0.0) + 1e-9, current.blocking,
             config.blocking_weight, rng.random(count),

@@ -8,6 +8,7 @@ import itertools
 import json
 import math
 import time
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
@@ -562,16 +563,41 @@ def test_the_first_neighbourhoods_follow_the_fleet(
     ctx = _context(stitched_problem(3, robots, 3.0), "avg_completion")
     assert ctx.problem.n_robots == robots
     counts: list[int] = []
+    monkeypatch.setattr(reinsert, "_pick", _counting(counts))
+    config = reinsert.ReinsertConfig(fleet_share=share, max_robots=32)
+    reinsert.reinsert_search(ctx, plain_start(ctx), np.inf, 0, config, max_steps=1)
+    assert counts == [first]
+
+
+def _counting(counts: list[int]) -> Callable[..., np.ndarray]:
+    """A spy for ``reinsert._pick`` that appends each step's neighbourhood size to
+    ``counts``."""
     original = reinsert._pick
 
     def spy(static: reinsert._Static, count: int, *args: object) -> np.ndarray:
         counts.append(count)
         return original(static, count, *args)
 
-    monkeypatch.setattr(reinsert, "_pick", spy)
-    config = reinsert.ReinsertConfig(fleet_share=share, max_robots=32)
-    reinsert.reinsert_search(ctx, plain_start(ctx), np.inf, 0, config, max_steps=1)
-    assert counts == [first]
+    return spy
+
+
+@pytest.mark.parametrize(
+    ("robots", "share", "most"), [(30, 0.2, 6), (30, 0.5, 15), (30, 1.0, 30), (12, 0.1, 6)]
+)
+def test_neighbourhoods_grow_on_a_stall_up_to_their_share_of_the_fleet(
+    robots: int, share: float, most: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Steps that improve nothing make neighbourhoods grow from ROBOTS (6) up to
+    ``max_share`` of the fleet (never below where they start, never past max_robots):
+    once it is reached, they stay there."""
+    ctx = _context(stitched_problem(3, robots, 3.0), "avg_completion")
+    counts: list[int] = []
+    monkeypatch.setattr(reinsert, "_pick", _counting(counts))
+    monkeypatch.setattr(reinsert, "_best_repair", lambda *args: None)  # no step improves
+    config = reinsert.ReinsertConfig(max_share=share, max_robots=32, anneal=0.0)
+    reinsert.reinsert_search(ctx, plain_start(ctx), np.inf, 0, config, max_steps=60)
+    assert counts[0] == reinsert.ROBOTS and max(counts) == most == counts[-1]
+    assert counts == sorted(counts)
 
 
 @settings(max_examples=30, deadline=None, suppress_health_check=SLOW)
