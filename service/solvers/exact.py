@@ -25,7 +25,9 @@ Search (measured on issue 11's conformance sets and generated warehouses by
 ``python -m bench.cpsat``, docs/benchmarks.md "CP-SAT configurations"): no LP
 relaxation but for sync_completion (``LINEARIZATION_LEVEL``), no probing in
 presolve (``PROBING_LEVEL``), one worker unless the policy says otherwise, hinted
-by the caller.
+by the caller; for avg_completion, where the default search has not proven
+optimality by 70 % of the time, CP-SAT's core-based search for the rest
+(``CORE_SHARE``).
 
 Determinism (measured the same way): the answer depends only on the problem,
 the hint and the seed when a proof ends the search, or when the search is
@@ -68,6 +70,8 @@ from service.solvers.fcfs import fcfs
 from service.solvers.registry import SolveContext, SolverOutput, register
 
 __all__ = [
+    "CORE_OBJECTIVES",
+    "CORE_SHARE",
     "Delays",
     "ExactModel",
     "ExactResult",
@@ -126,6 +130,19 @@ PROBING_LEVEL = 0
 # a third to a half of the time limit there, and a machine or a load up to about three
 # times slower still ends the search on this limit rather than the wall-clock one.
 DTIME_PER_S = 0.09
+# Objectives whose search ends with CP-SAT's core-based search (``optimize_with_core``:
+# lower bounds from unsatisfiable cores over the objective's terms) for the last
+# CORE_SHARE of its time, where the default search has not proven optimality by then. On
+# the largest components of the conformance set wh_100 (75-87 robots, 189-246 conflicts,
+# one worker) the default search proved none in 10 s (nor with linearization 0 or 2, without
+# LNS or with the objective's own lower-bound search), the core-based one each in 0.15-0.41
+# s; it proves nothing the default search does not prove faster on the other sets and the
+# generated worlds of 25-50 robots, and without the default search's solutions it often
+# finds none (so it comes second, hinted). avg_delay (weights 1/C_r) and the other
+# objectives: no proof in 3 s either way. Measured (session 48): docs/benchmarks.md
+# ("Core-based search").
+CORE_OBJECTIVES: frozenset[str] = frozenset({"avg_completion"})
+CORE_SHARE = 0.3
 
 
 @dataclass(eq=False)
@@ -204,6 +221,8 @@ class ExactResult:
     optimal: bool
     deterministic_time: float
     gap: float = 0.0
+    value: float = math.inf  # the objective's value in the model's units (integer-scaled)
+    bound: float = -math.inf  # CP-SAT's best bound on it
 
 
 def time_scale(problem: Problem) -> float:
@@ -545,7 +564,7 @@ def _result(solver: cp_model.CpSolver, em: ExactModel, status: int) -> ExactResu
     optimal = status == cp_model.OPTIMAL
     value, bound = solver.objective_value, solver.best_objective_bound
     gap = 0.0 if optimal or value <= 0 else max(0.0, (value - bound) / value)
-    return ExactResult(_read(solver, em), optimal, solver.deterministic_time, gap)
+    return ExactResult(_read(solver, em), optimal, solver.deterministic_time, gap, value, bound)
 
 
 class _Incumbents(cp_model.CpSolverSolutionCallback):
@@ -578,7 +597,10 @@ def solve(
     is part of it, and CP-SAT searches for what is left (at least MIN_SEARCH_S).
     ``on_solution`` (optional) sees every improving solution with its wall time,
     e.g. for measuring how fast CP-SAT reaches a given cost; ``tuning`` sets further
-    CP-SAT parameters (see :func:`search`).
+    CP-SAT parameters (see :func:`search`). For CORE_OBJECTIVES the default search
+    gets 1 - CORE_SHARE of the search time, and where it has not proven optimality,
+    CP-SAT's core-based search the rest, hinted with its answer (see CORE_SHARE): the
+    better answer, and a proof if either reached one.
 
     Args:
         deterministic: also limit the search in deterministic time, ``DTIME_PER_S``
@@ -590,14 +612,51 @@ def solve(
     em = build_model(problem, cliques, objective)
     if hint is not None:
         em.add_hint(hint)
+    began = time.monotonic()
+    left = max(MIN_SEARCH_S, deadline - began)
+    core_s = CORE_SHARE * left if objective in CORE_OBJECTIVES else 0.0
+    phase = {**(tuning or {})}
+    if deterministic:  # each phase's share of the time limit, in deterministic time
+        phase["interleave_search"] = workers > 1
+        phase["max_deterministic_time"] = DTIME_PER_S * time_limit_s * (1 - core_s / left)
+    found = search(em, left - core_s, seed, workers, on_solution, phase)
+    if core_s <= 0 or (found is not None and found.optimal):
+        return found
+    if found is not None:
+        em.add_hint(found.assignment)
     if deterministic:
-        tuning = {
-            **(tuning or {}),
-            "max_deterministic_time": DTIME_PER_S * time_limit_s,
-            "interleave_search": workers > 1,
-        }
-    left = max(MIN_SEARCH_S, deadline - time.monotonic())
-    return search(em, left, seed, workers, on_solution, tuning)
+        phase["max_deterministic_time"] = DTIME_PER_S * time_limit_s * core_s / left
+    shifted = _shifted(on_solution, time.monotonic() - began)
+    cored = search(
+        em, max(MIN_SEARCH_S, deadline - time.monotonic()), seed, workers, shifted,
+        {**phase, "optimize_with_core": True},
+    )  # fmt: skip
+    return _better(found, cored)
+
+
+def _shifted(
+    on_solution: Callable[[float, Assignments], None] | None, seconds: float
+) -> Callable[[float, Assignments], None] | None:
+    """``on_solution`` for a search begun ``seconds`` after the first search of a solve:
+    its wall times shifted by them, so that they count from where the first's did."""
+    if on_solution is None:
+        return None
+    return lambda wall_time, assignment: on_solution(wall_time + seconds, assignment)
+
+
+def _better(first: ExactResult | None, second: ExactResult | None) -> ExactResult | None:
+    """The better of two searches of one model: the second where it is proven optimal or
+    cheaper, else the first; with the higher of their bounds (and the gap it leaves) and
+    the work of both."""
+    if first is None or second is None:
+        return first if second is None else second
+    found = second if second.optimal or second.value < first.value else first
+    work = first.deterministic_time + second.deterministic_time
+    if found.optimal:
+        return replace(found, deterministic_time=work)
+    bound = max(first.bound, second.bound)
+    gap = 0.0 if found.value <= 0 else max(0.0, (found.value - bound) / found.value)
+    return replace(found, deterministic_time=work, bound=bound, gap=gap)
 
 
 def search(
