@@ -109,6 +109,13 @@ VARIANTS: dict[str, Variant] = {
         linearization=0,
         probing=0,
     ),
+    "lin0_probe0_core": Variant(
+        "linearization 0, no probing, core-based search (the service's last 30 % for "
+        "avg_completion)",
+        linearization=0,
+        probing=0,
+        tuning=(("optimize_with_core", True),),
+    ),
     "lin2": Variant("linearization 2", linearization=2),
     "cutoff": Variant("objective <= the hint's cost", cutoff=True),
     "lin0_cutoff": Variant(
