@@ -341,7 +341,7 @@ def target_table(rows: Sequence[dict[str, Any]], method: str = TARGET_METHOD) ->
         lines.append(
             f"\nProven optimal at 5 s where the independent MILP proves within 5 s: "
             f"{sum(r['optimal'] for r in proven)} of {len(proven)} "
-            f"({', '.join(r['name'] for r in proven if not r['optimal']) or 'all'} unproven)."
+            f"({', '.join(r['name'] for r in proven if not r['optimal']) or 'none'} unproven)."
         )
     return "\n".join(lines)
 
