@@ -109,6 +109,8 @@ def test_targets_group_warehouses_and_dense_floors() -> None:
     assert "| 5 s | warehouse | both | 1 | 0.9950 (>= 0.999) | 0.950 (>= 0.98) | missed |" in text
     assert "generated" not in text
     assert "0 of 1 (wh_25/0 unproven)" in text
+    proven = target_table([{**row, "budget_s": 5.0, "optimal": True}])
+    assert "1 of 1 (none unproven)" in proven
 
 
 def test_quick_defaults_and_flags() -> None:
