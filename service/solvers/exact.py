@@ -139,7 +139,8 @@ DTIME_PER_S = 0.09
 # s; it proves nothing the default search does not prove faster on the other sets and the
 # generated worlds of 25-50 robots, and without the default search's solutions it often
 # finds none (so it comes second, hinted). avg_delay (weights 1/C_r) and the other
-# objectives: no proof in 3 s either way. Measured (session 48): docs/benchmarks.md
+# objectives: no proof in 3 s either way. It runs on one worker: asked of two, CP-SAT's
+# portfolio proved none of wh_100 in 3 s. Measured (session 48): docs/benchmarks.md
 # ("Core-based search").
 CORE_OBJECTIVES: frozenset[str] = frozenset({"avg_completion"})
 CORE_SHARE = 0.3
@@ -599,8 +600,8 @@ def solve(
     e.g. for measuring how fast CP-SAT reaches a given cost; ``tuning`` sets further
     CP-SAT parameters (see :func:`search`). For CORE_OBJECTIVES the default search
     gets 1 - CORE_SHARE of the search time, and where it has not proven optimality,
-    CP-SAT's core-based search the rest, hinted with its answer (see CORE_SHARE): the
-    better answer, and a proof if either reached one.
+    CP-SAT's core-based search the rest on one worker, hinted with its answer (see
+    CORE_SHARE): the better answer, and a proof if either reached one.
 
     Args:
         deterministic: also limit the search in deterministic time, ``DTIME_PER_S``
@@ -627,9 +628,9 @@ def solve(
     if deterministic:
         phase["max_deterministic_time"] = DTIME_PER_S * time_limit_s * core_s / left
     shifted = _shifted(on_solution, time.monotonic() - began)
-    cored = search(
-        em, max(MIN_SEARCH_S, deadline - time.monotonic()), seed, workers, shifted,
-        {**phase, "optimize_with_core": True},
+    cored = search(  # one worker: with several, CP-SAT's portfolio left out the core search
+        em, max(MIN_SEARCH_S, deadline - time.monotonic()), seed, 1, shifted,
+        {**phase, "optimize_with_core": True, "interleave_search": False},
     )  # fmt: skip
     return _better(found, cored)
 

@@ -121,14 +121,14 @@ def test_search_runs_a_built_model_and_tuning_overrides_the_defaults() -> None:
 
 def _searches(
     monkeypatch: pytest.MonkeyPatch, results: list[ExactResult | None]
-) -> list[tuple[float, dict[str, object], bytes | None]]:
+) -> list[tuple[float, dict[str, object], bytes | None, int]]:
     """``exact.search`` replaced by one returning ``results`` in turn and recording each
-    call's time limit, tuning and hinted directions."""
-    calls: list[tuple[float, dict[str, object], bytes | None]] = []
+    call's time limit, tuning, hinted directions and workers."""
+    calls: list[tuple[float, dict[str, object], bytes | None, int]] = []
 
     def fake(em, time_limit_s, seed, workers, on_solution, tuning):  # noqa: ANN001, ANN202
         hint = em.model.proto.solution_hint.values
-        calls.append((time_limit_s, dict(tuning or {}), bytes(hint) if hint else None))
+        calls.append((time_limit_s, dict(tuning or {}), bytes(hint) if hint else None, workers))
         return results[len(calls) - 1]
 
     monkeypatch.setattr(exact, "search", fake)
@@ -141,21 +141,25 @@ def _result(ctx: SolveContext, optimal: bool, value: float, bound: float) -> Exa
     return ExactResult(fcfs(ctx).assignment, optimal, 1.0, gap, value, bound)
 
 
-@pytest.mark.parametrize("deterministic", [False, True])
+@pytest.mark.parametrize(("deterministic", "workers"), [(False, 1), (True, 1), (False, 2)])
 def test_an_unproven_search_ends_with_the_core_based_one(
-    deterministic: bool, monkeypatch: pytest.MonkeyPatch
+    deterministic: bool, workers: int, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """avg_completion: the default search gets 1 - CORE_SHARE of the time; unproven, the
-    core-based search the rest, hinted with its answer; its proof is the answer, with
-    the work of both (and in deterministic mode their deterministic budgets split the
-    same way)."""
+    core-based search the rest (on one worker: with several, CP-SAT's portfolio proved
+    none of wh_100), hinted with its answer; its proof is the answer, with the work of
+    both (and in deterministic mode their deterministic budgets split the same way)."""
     ctx = _context(3, "avg_completion")
     proven = _result(ctx, True, 90.0, 90.0)
     calls = _searches(monkeypatch, [_result(ctx, False, 100.0, 50.0), proven])
-    found = solve(ctx.problem, ctx.cliques, "avg_completion", 10.0, deterministic=deterministic)
+    found = solve(
+        ctx.problem, ctx.cliques, "avg_completion", 10.0, workers=workers,
+        deterministic=deterministic,
+    )  # fmt: skip
     assert found is not None and found.optimal and found.value == 90.0
     assert found.deterministic_time == 2.0
-    (first_s, first, first_hint), (rest_s, then, then_hint) = calls
+    (first_s, first, first_hint, first_workers), (rest_s, then, then_hint, then_workers) = calls
+    assert (first_workers, then_workers) == (workers, 1)
     assert first_s == pytest.approx((1 - exact.CORE_SHARE) * 10.0, abs=0.05)
     assert rest_s == pytest.approx(10.0, abs=0.05)  # to the deadline (the fake took no time)
     assert "optimize_with_core" not in first and then["optimize_with_core"] is True
@@ -230,8 +234,7 @@ def _wh() -> tuple[ScheduleRequest, SolveContext]:
 def test_deterministic_mode_repeats_its_answer_when_the_limit_cuts_it(workers: int) -> None:
     """Cut by its deterministic budget (not proven), the same answer on every run; the work
     done within 1.5 times that budget per worker (two workers interleaved, CP-SAT reported
-    up to 2.7 times a search's limit: each of the default and the core-based searches
-    ends its batches past its own share)."""
+    up to 2.7 times a search's limit: it ends its batches past the limit)."""
     _, ctx = _wh()
     hint = fcfs(ctx).assignment
     answers = set()
