@@ -140,8 +140,9 @@ DTIME_PER_S = 0.09
 # generated worlds of 25-50 robots, and without the default search's solutions it often
 # finds none (so it comes second, hinted). avg_delay (weights 1/C_r) and the other
 # objectives: no proof in 3 s either way. It runs on one worker: asked of two, CP-SAT's
-# portfolio proved none of wh_100 in 3 s. Measured (session 48): docs/benchmarks.md
-# ("Core-based search").
+# portfolio proved none of wh_100 in 3 s. The datagen's top-L labels search the same way
+# (top-3 at 5 s a solve, the sets wh_50, wh_100 and six 25-robot worlds: 30 -> 33 labels
+# proven). Measured (session 48): docs/benchmarks.md ("Core-based search").
 CORE_OBJECTIVES: frozenset[str] = frozenset({"avg_completion"})
 CORE_SHARE = 0.3
 
@@ -613,20 +614,39 @@ def solve(
     em = build_model(problem, cliques, objective)
     if hint is not None:
         em.add_hint(hint)
+    dtime = DTIME_PER_S * time_limit_s if deterministic else None
+    return _search_then_core(em, objective, deadline, seed, workers, on_solution, tuning, dtime)
+
+
+def _search_then_core(
+    em: ExactModel,
+    objective: Objective,
+    deadline: float,
+    seed: int,
+    workers: int,
+    on_solution: Callable[[float, Assignments], None] | None = None,
+    tuning: Tuning | None = None,
+    dtime: float | None = None,
+) -> ExactResult | None:
+    """``em`` searched until ``deadline`` (monotonic): for CORE_OBJECTIVES the default search
+    for 1 - CORE_SHARE of the time and, where it has not proven optimality, the core-based
+    search for the rest, hinted with its answer, on one worker (see CORE_SHARE) -> the
+    better of the two (:func:`_better`); for other objectives the default search alone.
+    ``dtime``: a deterministic-time budget, split the same way (None: none)."""
     began = time.monotonic()
     left = max(MIN_SEARCH_S, deadline - began)
     core_s = CORE_SHARE * left if objective in CORE_OBJECTIVES else 0.0
     phase = {**(tuning or {})}
-    if deterministic:  # each phase's share of the time limit, in deterministic time
+    if dtime is not None:  # each search's share, interleaving several workers
         phase["interleave_search"] = workers > 1
-        phase["max_deterministic_time"] = DTIME_PER_S * time_limit_s * (1 - core_s / left)
+        phase["max_deterministic_time"] = dtime * (1 - core_s / left)
     found = search(em, left - core_s, seed, workers, on_solution, phase)
     if core_s <= 0 or (found is not None and found.optimal):
         return found
     if found is not None:
         em.add_hint(found.assignment)
-    if deterministic:
-        phase["max_deterministic_time"] = DTIME_PER_S * time_limit_s * core_s / left
+    if dtime is not None:
+        phase["max_deterministic_time"] = dtime * core_s / left
     shifted = _shifted(on_solution, time.monotonic() - began)
     cored = search(  # one worker: with several, CP-SAT's portfolio left out the core search
         em, max(MIN_SEARCH_S, deadline - time.monotonic()), seed, 1, shifted,
@@ -697,21 +717,21 @@ def top_assignments(
     CP-SAT has no top-k with an objective, so each next one is found by
     re-solving with a no-good clause over the direction and type literals of
     every earlier one, hinted with the previous solution (the first solve with
-    ``hint``, if given). ``time_limit_s`` is per solve; a solve that does not
-    prove optimality is kept with ``optimal=False`` and its gap, and ends the
-    enumeration.
+    ``hint``, if given), each searched as :func:`solve` searches (the core-based
+    search last for CORE_OBJECTIVES). ``time_limit_s`` is per solve; a solve that
+    does not prove optimality is kept with ``optimal=False`` and its gap, and ends
+    the enumeration.
     """
     em = build_model(problem, cliques, objective)
     if hint is not None:
         em.add_hint(hint)
     results: list[ExactResult] = []
     while len(results) < count:
-        solver = _params(time_limit_s, seed, workers, em.tuning())
-        status = solver.solve(em.model)
-        if status not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
+        found = _search_then_core(em, objective, time.monotonic() + time_limit_s, seed, workers)
+        if found is None:
             break
-        results.append(_result(solver, em, status))
-        if status != cp_model.OPTIMAL:
+        results.append(found)
+        if not found.optimal:
             break
         em.exclude(results[-1].assignment)
         em.add_hint(results[-1].assignment)

@@ -18,7 +18,15 @@ from service.core.schemas import OBJECTIVES, Objective, OptionsIn, ScheduleReque
 from service.settings import Settings
 from service.solvers import exact
 from service.solvers.dispatch import dispatch
-from service.solvers.exact import DTIME_PER_S, ExactResult, Tuning, build_model, search, solve
+from service.solvers.exact import (
+    DTIME_PER_S,
+    ExactResult,
+    Tuning,
+    build_model,
+    search,
+    solve,
+    top_assignments,
+)
 from service.solvers.fcfs import fcfs
 from service.solvers.milp import solve_milp
 from service.solvers.registry import SolveContext
@@ -209,7 +217,8 @@ def test_the_cheaper_of_two_unproven_searches_is_kept_with_the_higher_bound(
 def test_the_core_based_search_proves_what_the_default_one_does_not() -> None:
     """The largest component of the conformance problem wh_100/0 (75 robots, 189
     conflicts): the default search alone proves nothing in 3 s, the solve (ending with
-    the core-based search) proves the optimum the MILP backend proves too."""
+    the core-based search) proves the optimum the MILP backend proves too, and the
+    top-2 enumeration (the datagen's labels) proves its two best."""
     rec = json.loads((DATA / "wh_100.jsonl").read_text().splitlines()[0])
     request = ScheduleRequest.model_validate(rec["request"])
     part = max(parts(problem_from_request(request)), key=lambda p: p.problem.n_conflicts)
@@ -221,6 +230,10 @@ def test_the_core_based_search_proves_what_the_default_one_does_not() -> None:
     assert found is not None and found.optimal and milp is not None and milp.optimal
     cost = float(ctx.evaluator.evaluate(found.assignment).costs["avg_completion"][0])
     assert cost == pytest.approx(milp.objective, rel=1e-6)
+    top = top_assignments(ctx.problem, ctx.cliques, "avg_completion", 2, 3.0)
+    assert [r.optimal for r in top] == [True, True]
+    costs = [float(ctx.evaluator.evaluate(r.assignment).costs["avg_completion"][0]) for r in top]
+    assert costs[0] == pytest.approx(cost, rel=1e-6) and costs[1] >= costs[0] - 1e-9
 
 
 def _wh() -> tuple[ScheduleRequest, SolveContext]:
