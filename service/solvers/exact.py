@@ -565,8 +565,14 @@ def _result(solver: cp_model.CpSolver, em: ExactModel, status: int) -> ExactResu
     """The answer of a solve that found a solution (status OPTIMAL or FEASIBLE)."""
     optimal = status == cp_model.OPTIMAL
     value, bound = solver.objective_value, solver.best_objective_bound
-    gap = 0.0 if optimal or value <= 0 else max(0.0, (value - bound) / value)
+    gap = 0.0 if optimal else _gap(value, bound)
     return ExactResult(_read(solver, em), optimal, solver.deterministic_time, gap, value, bound)
+
+
+def _gap(value: float, bound: float) -> float:
+    """The relative gap (value - bound) / value an unproven search leaves (0 where the
+    value is not positive)."""
+    return 0.0 if value <= 0 else max(0.0, (value - bound) / value)
 
 
 class _Incumbents(cp_model.CpSolverSolutionCallback):
@@ -676,8 +682,7 @@ def _better(first: ExactResult | None, second: ExactResult | None) -> ExactResul
     if found.optimal:
         return replace(found, deterministic_time=work)
     bound = max(first.bound, second.bound)
-    gap = 0.0 if found.value <= 0 else max(0.0, (found.value - bound) / found.value)
-    return replace(found, deterministic_time=work, bound=bound, gap=gap)
+    return replace(found, deterministic_time=work, bound=bound, gap=_gap(found.value, bound))
 
 
 def search(
