@@ -1,0 +1,180 @@
+"""``auto``'s exact stage ending with the MILP backend (``exact.improve``,
+MILP_STAGE_OBJECTIVES): its proofs against brute force, the cross-checks that void a
+proof, the time split, and a proof CP-SAT does not reach."""
+
+from __future__ import annotations
+
+import json
+from functools import cache
+from pathlib import Path
+
+import pytest
+
+from service.core.assignment import Assignments
+from service.core.decompose import parts
+from service.core.problem import problem_from_request
+from service.core.schemas import Objective, ScheduleRequest
+from service.solvers import exact
+from service.solvers.exact import MILP_NAME, ExactResult, improve
+from service.solvers.fcfs import fcfs
+from service.solvers.milp import MilpResult, solve_milp
+from service.solvers.registry import SolveContext, SolverOutput
+from tests.reference import Candidate, feasible_assignments, reference_problem, tiny_request
+
+TIME_LIMIT_S = 30.0  # generous: tiny problems solve in milliseconds
+REL = 1e-6
+DATA = Path(__file__).resolve().parents[1] / "data" / "conformance"
+
+
+def _context(seed: int, objective: Objective = "avg_delay") -> SolveContext:
+    req = ScheduleRequest.model_validate(tiny_request(seed))
+    return SolveContext(problem_from_request(req), objective, TIME_LIMIT_S)
+
+
+@cache
+def _brute(seed: int) -> list[Candidate]:
+    return feasible_assignments(reference_problem(tiny_request(seed)))
+
+
+def _single(candidate: Candidate) -> Assignments:
+    return Assignments.single(candidate.a_first, candidate.following)
+
+
+def _worst_and_best(seed: int) -> tuple[Candidate, Candidate]:
+    ranked = sorted(_brute(seed), key=lambda c: c.costs["avg_delay"])
+    return ranked[-1], ranked[0]
+
+
+def _start(ctx: SolveContext, candidate: Candidate) -> SolverOutput:
+    return SolverOutput(_single(candidate))
+
+
+def _no_cpsat(monkeypatch: pytest.MonkeyPatch) -> None:
+    """CP-SAT finds nothing: the stage's answer can only be the MILP's or the hint."""
+    monkeypatch.setattr(exact, "solve", lambda *args, **kwargs: None)
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_the_milp_stage_proves_the_brute_force_optimum(
+    seed: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """With CP-SAT finding nothing, the MILP stage proves avg_delay's optimum from the
+    dearest valid answer: the evaluator's cost of its answer is the brute-force optimum."""
+    _no_cpsat(monkeypatch)
+    ctx = _context(seed)
+    worst, best = _worst_and_best(seed)
+    found, verdict = improve(ctx, _start(ctx, worst), TIME_LIMIT_S)
+    assert found.optimal and verdict == f"proven optimal by {MILP_NAME}"
+    assert ctx.cost(found.assignment) == pytest.approx(best.costs["avg_delay"], rel=REL, abs=1e-9)
+
+
+def _fake_milp(
+    monkeypatch: pytest.MonkeyPatch, answer: Assignments, objective: float
+) -> list[float]:
+    """solve_milp returning ``answer`` as proven with ``objective``; the time limits it
+    was given."""
+    limits: list[float] = []
+
+    def fake(problem, cliques, evaluator, objective_name, time_limit_s):  # noqa: ANN001, ANN202
+        limits.append(time_limit_s)
+        return MilpResult(answer, True, objective, objective, 0.0, 0.0)
+
+    monkeypatch.setattr(exact, "solve_milp", fake)
+    return limits
+
+
+def test_a_proof_the_evaluator_contradicts_is_not_taken(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A MILP 'optimum' whose objective value is not the evaluator's cost of its answer
+    is kept as an answer where cheaper, never as proven."""
+    _no_cpsat(monkeypatch)
+    seed = next(s for s in range(50) if len({c.costs["avg_delay"] for c in _brute(s)}) > 1)
+    ctx = _context(seed)
+    worst, best = _worst_and_best(seed)
+    _fake_milp(monkeypatch, _single(best), 0.5 * best.costs["avg_delay"] - 1.0)
+    found, verdict = improve(ctx, _start(ctx, worst), TIME_LIMIT_S)
+    assert not found.optimal and verdict == f"improved by {MILP_NAME}"
+    assert ctx.cost(found.assignment) == pytest.approx(best.costs["avg_delay"], rel=REL)
+
+
+def test_a_cheaper_cpsat_answer_voids_the_milp_proof(monkeypatch: pytest.MonkeyPatch) -> None:
+    """CP-SAT's unproven answer cheaper than a 'proven' MILP answer: HiGHS erred; CP-SAT's
+    answer is kept, unproven."""
+    seed = next(s for s in range(50) if len({c.costs["avg_delay"] for c in _brute(s)}) > 2)
+    ctx = _context(seed)
+    worst, best = _worst_and_best(seed)
+    middle = sorted(_brute(seed), key=lambda c: c.costs["avg_delay"])[len(_brute(seed)) // 2]
+    unproven = ExactResult(_single(best), False, 0.0, 0.5)
+    monkeypatch.setattr(exact, "solve", lambda *args, **kwargs: unproven)
+    _fake_milp(monkeypatch, _single(middle), middle.costs["avg_delay"])
+    found, verdict = improve(ctx, _start(ctx, worst), TIME_LIMIT_S)
+    assert not found.optimal and verdict == "improved by CP-SAT"
+    assert ctx.cost(found.assignment) == pytest.approx(best.costs["avg_delay"], rel=REL)
+
+
+def _cpsat_unproven(monkeypatch: pytest.MonkeyPatch, answer: Assignments) -> list[float]:
+    """CP-SAT returning ``answer`` unproven; the time limits it was given."""
+    limits: list[float] = []
+
+    def unproven(problem, cliques, objective, time_limit_s, **kwargs):  # noqa: ANN001, ANN202
+        limits.append(time_limit_s)
+        return ExactResult(answer, False, 0.0, 0.5)
+
+    monkeypatch.setattr(exact, "solve", unproven)
+    return limits
+
+
+def test_cpsat_gets_its_share_and_the_milp_the_rest(monkeypatch: pytest.MonkeyPatch) -> None:
+    """CP-SAT searches for 1 - MILP_STAGE_SHARE of the stage's time, the MILP until its
+    deadline; where CP-SAT proves, the MILP never runs."""
+    ctx = _context(0)
+    worst, best = _worst_and_best(0)
+    cpsat = _cpsat_unproven(monkeypatch, _single(worst))
+    milp = _fake_milp(monkeypatch, _single(best), best.costs["avg_delay"])
+    found, verdict = improve(ctx, _start(ctx, worst), 2.0)
+    assert found.optimal and verdict == f"proven optimal by {MILP_NAME}"
+    assert cpsat == [pytest.approx(2.0 * (1 - exact.MILP_STAGE_SHARE))]
+    assert len(milp) == 1 and 2.0 * exact.MILP_STAGE_SHARE - 0.1 < milp[0] <= 2.0
+    monkeypatch.setattr(exact, "solve", lambda *a, **k: ExactResult(_single(best), True, 0.0))
+    found, verdict = improve(ctx, _start(ctx, worst), 2.0)
+    assert found.optimal and verdict == "proven optimal by CP-SAT" and len(milp) == 1
+
+
+@pytest.mark.parametrize("objective", ["avg_completion", "max_completion", "sync_completion"])
+def test_other_objectives_keep_cpsat_alone(
+    objective: Objective, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Outside MILP_STAGE_OBJECTIVES the stage is CP-SAT's, for all of its time."""
+    assert objective not in exact.MILP_STAGE_OBJECTIVES
+    ctx = _context(0, objective)
+    limits = _cpsat_unproven(monkeypatch, fcfs(ctx).assignment)
+    milp = _fake_milp(monkeypatch, fcfs(ctx).assignment, 0.0)
+    found, _ = improve(ctx, fcfs(ctx), 2.0)
+    assert not found.optimal and limits == [2.0] and milp == []
+
+
+def test_the_milp_stage_proves_what_cpsat_does_not() -> None:
+    """The largest component of the conformance problem wh_100/0 posed for avg_delay (75
+    robots, 189 conflicts): CP-SAT alone does not prove it in 4 s; the stage, its last
+    MILP_STAGE_SHARE the MILP's, proves the optimum a long MILP run proves too."""
+    rec = json.loads((DATA / "wh_100.jsonl").read_text().splitlines()[0])
+    request = ScheduleRequest.model_validate(rec["request"])
+    part = max(parts(problem_from_request(request)), key=lambda p: p.problem.n_conflicts)
+    ctx = SolveContext(part.problem, "avg_delay", 4.0)
+    alone = exact.solve(ctx.problem, ctx.cliques, "avg_delay", 4.0, hint=fcfs(ctx).assignment)
+    assert alone is not None and not alone.optimal
+    found, verdict = improve(ctx, fcfs(ctx), 4.0)
+    assert found.optimal and verdict == f"proven optimal by {MILP_NAME}"
+    milp = solve_milp(ctx.problem, ctx.cliques, ctx.evaluator, "avg_delay", 60.0)
+    assert milp is not None and milp.optimal
+    assert ctx.cost(found.assignment) == pytest.approx(milp.objective, rel=REL)
+
+
+def test_larger_problems_keep_cpsat_alone(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Above MILP_STAGE_MAX_CONFLICTS conflicts avg_delay's stage is CP-SAT's, for all of
+    its time."""
+    ctx = _context(0)
+    monkeypatch.setattr(exact, "MILP_STAGE_MAX_CONFLICTS", ctx.problem.n_conflicts - 1)
+    limits = _cpsat_unproven(monkeypatch, fcfs(ctx).assignment)
+    milp = _fake_milp(monkeypatch, fcfs(ctx).assignment, 0.0)
+    found, _ = improve(ctx, fcfs(ctx), 2.0)
+    assert not found.optimal and limits == [2.0] and milp == []
