@@ -799,11 +799,12 @@ def improve(
     found += [] if milp is None else [(milp[0], MILP_NAME)]
     if not found:
         return replace(start, optimal=False), "CP-SAT found nothing"
-    costs = [ctx.cost(answer) for answer, _ in found]
-    k = int(np.argmin(costs))
-    # The MILP's proof is taken where no other answer is cheaper (else HiGHS erred).
-    proven = milp is not None and milp[1] and costs[-1] <= costs[k] * (1 + MILP_COST_TOL)
-    k = len(found) - 1 if proven else k
+    k, proven = 0, milp is not None and milp[1]
+    if len(found) == 2:  # CP-SAT's and the MILP's: the cheaper
+        costs = [ctx.cost(answer) for answer, _ in found]
+        # The MILP's proof holds only where CP-SAT's answer is not cheaper (else HiGHS erred).
+        proven = proven and costs[1] <= costs[0] * (1 + MILP_COST_TOL)
+        k = 1 if proven else int(np.argmin(costs))
     return _kept_or_hint(ctx, start, *found[k], proven=proven)
 
 
