@@ -22,6 +22,8 @@ from bench.anytime import (
 )
 from bench.cases import conformance_cases, measured, world_case
 from bench.report import JsonCache, config_from_args
+from service.solvers.exact import solve
+from service.solvers.registry import SolveContext
 
 
 def _raw(method: str, cost: float, budget: float = 1.0, optimal: bool = False) -> dict:
@@ -174,3 +176,28 @@ def test_quick_run_writes_everything(tmp_path: Path) -> None:
     tables = (out / "tables.md").read_text()
     assert all(f"`{m}` against issue 11's targets" in tables for m in ("auto", "auto_2cores"))
     assert main(["--quick", "--out", str(out), "--summarize"]) == 0  # re-renders from raw
+
+
+def test_sets_posed_for_another_objective_take_the_milps_proof_as_reference(
+    monkeypatch, tmp_path: Path
+) -> None:
+    """With --objective avg_delay a set's problem (an avg_completion one) is judged against
+    the MILP backend's proven optimum (CP-SAT proves the same), its proof time the MILP's,
+    cached by request; its own objective, or one the MILP does not model, leaves it as is."""
+    cfg = replace(Config(), sets=("wh_25",), per_set=1, worlds=(), objective="avg_delay")
+    (case,) = anytime.cases_of(cfg)
+    assert case.objective == "avg_delay" and case.ref_cost is None
+    cache = JsonCache(tmp_path / "refs.json")
+    judged = anytime.with_milp_reference(case, cfg, cache)
+    assert 0 < judged.ref_runtime_s <= anytime.MILP_REFERENCE_S
+    ctx = SolveContext(case.problem, "avg_delay", 30.0)
+    proven = solve(case.problem, case.cliques, "avg_delay", 30.0)
+    assert proven is not None and proven.optimal
+    assert judged.ref_cost == pytest.approx(ctx.cost(proven.assignment), rel=1e-6)
+    monkeypatch.setattr(anytime, "solve_once", lambda *args: pytest.fail("not cached"))
+    again = anytime.with_milp_reference(case, cfg, cache)
+    assert (again.ref_cost, again.ref_runtime_s) == (judged.ref_cost, judged.ref_runtime_s)
+    (own,) = anytime.cases_of(replace(cfg, objective=None))
+    assert anytime.with_milp_reference(own, cfg, cache) is own and own.ref_cost is not None
+    (sync,) = anytime.cases_of(replace(cfg, objective="sync_completion"))
+    assert anytime.with_milp_reference(sync, cfg, cache).ref_cost is None
