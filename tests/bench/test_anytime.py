@@ -85,12 +85,18 @@ def test_a_long_reference_run_joins_the_yardstick_of_generated_worlds_once(
 
 
 def test_committed_references_seed_a_cache_without_overwriting_it(tmp_path: Path) -> None:
-    """The committed yardstick is keyed as the cache is (request, objective, 30 s) and holds
-    REFERENCE_METHOD's runs; seeding adds what a cache lacks and keeps what it has."""
+    """The committed yardstick is keyed as the cache is: (request, objective, 30 s) holding
+    REFERENCE_METHOD's runs (avg_completion and avg_delay), or (request, objective, the MILP's
+    seconds, "milp") holding the MILP backend's row; seeding adds what a cache lacks and
+    keeps what it has."""
     committed = json.loads(anytime.REFERENCES.read_text())
-    assert len(committed) >= 20
-    assert all(key.endswith("-avg_completion-30s") for key in committed)
-    assert {r["method"] for runs in committed.values() for r in runs} == {anytime.REFERENCE_METHOD}
+    runs = {k: v for k, v in committed.items() if k.endswith("-30s")}
+    milp_key = f"-{anytime.MILP_REFERENCE_S:g}s-milp"
+    milp = {k: v for k, v in committed.items() if k.endswith(milp_key)}
+    assert len(runs) >= 20 and len(runs) + len(milp) == len(committed)
+    assert {key.split("-")[1] for key in runs} == {"avg_completion", "avg_delay"}
+    assert {r["method"] for rows in runs.values() for r in rows} == {anytime.REFERENCE_METHOD}
+    assert {row["backend"] for row in milp.values()} == {"milp"}
     cache = JsonCache(tmp_path / "refs.json")
     mine = next(iter(committed))
     cache.get(mine, lambda: [{"cost": 1.0}])
