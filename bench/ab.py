@@ -51,7 +51,7 @@ from bench.cases import (
     service_policy,
     world_cases,
 )
-from bench.report import MODEL_STORE, delay_ratio, jsonable, machine_info, nanmean
+from bench.report import MODEL_STORE, cost_ratio, delay_ratio, jsonable, machine_info, nanmean
 from service.memory import settle
 
 __all__ = ["Config", "Setting", "main", "parse_setting", "run", "table"]
@@ -198,7 +198,7 @@ def table(rows: Sequence[dict[str, Any]]) -> str:
         ref = best[r["name"]]
         for family in (r["family"], "all"):
             ratios[family][r["variant"]].append(
-                (ref / r["cost"], delay_ratio(ref, r["cost"], r["free"]))
+                (cost_ratio(ref, r["cost"]), delay_ratio(ref, r["cost"], r["free"]))
             )
             costs[family][(r["name"], r["seed"])][r["variant"]] = r["cost"]
             proven[family][r["variant"]] += bool(r.get("optimal"))

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from bench.report import C, config_from_args, delay_ratio, fmt, nanmean
+from bench.report import C, config_from_args, cost_ratio, delay_ratio, fmt, nanmean
 from service.core.cliques import Cliques, find_cliques
 from service.core.evaluate import Evaluator
 from service.core.path_schemas import PathsRequest
@@ -189,7 +189,7 @@ def measured(case: Case, rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]
             **r,
             "ref_cost": ref,
             "ref_proven": proven,
-            "ratio": ref / r["cost"] if r["cost"] > 0 else 1.0,
+            "ratio": cost_ratio(ref, r["cost"]),
             "delay_ratio": delay_ratio(ref, r["cost"], case.free),
             "reached": r["cost"] <= ref * (1 + REL_TOL),
         }

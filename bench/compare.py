@@ -40,6 +40,7 @@ from tqdm import tqdm
 from bench.problems import BenchProblem, small_set, stitched_set
 from bench.report import (
     add_run_args,
+    cost_ratio,
     delay_ratio,
     fmt,
     format_table,
@@ -245,7 +246,7 @@ def finish_rows(
                 "ref_cost": ref,
                 "ref_source": source,
                 "free": case.free,
-                "ratio": ref / cost if cost > 0 else 1.0,
+                "ratio": cost_ratio(ref, cost),
                 "delay_ratio": delay_ratio(ref, cost, case.free),
                 "gap": cost - ref,
                 "reached_ref": bool(reached),

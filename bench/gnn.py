@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from bench.report import delay_ratio, save_figure
+from bench.report import cost_ratio, delay_ratio, save_figure
 from service.core.cliques import find_cliques
 from service.core.decode import Decoder
 from service.core.evaluate import Evaluator
@@ -206,10 +206,6 @@ def large_rows(
     return rows
 
 
-def _ratio(ref: float, cost: float) -> float:
-    return ref / cost if cost > 0 else 1.0
-
-
 def summarize_small(rows: list[dict[str, Any]]) -> list[str]:
     """Table lines: per set and objective, ratio / delay ratio per method, runtime."""
     out = [
@@ -225,7 +221,7 @@ def summarize_small(rows: list[dict[str, Any]]) -> list[str]:
             if objective == "avg_delay":
                 cells.append(f"gap {np.mean([r[m] - r['opt'] for r in sel]):9.4f}")
             else:
-                ratio = np.mean([_ratio(r["opt"], r[m]) for r in sel])
+                ratio = np.mean([cost_ratio(r["opt"], r[m]) for r in sel])
                 dr = np.nanmean([delay_ratio(r["opt"], r[m], r["free"]) for r in sel])
                 cells.append(f"{ratio:.4f} / {dr:.3f}")
         ms = 1e3 * np.mean([r["gnn100_s"] for r in sel])
@@ -281,7 +277,7 @@ def paired_lines(rows: list[dict[str, Any]], base: list[dict[str, Any]]) -> list
 
 
 def _ratio_score(row: dict[str, Any], key: str) -> float:
-    return _ratio(row["opt"], row[key])
+    return cost_ratio(row["opt"], row[key])
 
 
 def _gap_score(row: dict[str, Any], key: str) -> float:
@@ -314,7 +310,7 @@ def summarize_large(rows: list[dict[str, Any]]) -> list[str]:
             if not sel:
                 continue
             cells = "".join(
-                f" {np.mean([_ratio(r['best'], r[m]) for r in sel]):8.4f}/"
+                f" {np.mean([cost_ratio(r['best'], r[m]) for r in sel]):8.4f}/"
                 f"{np.nanmean([delay_ratio(r['best'], r[m], r['free']) for r in sel]):<8.3f}"
                 for m in LARGE_METHODS
             )

@@ -40,7 +40,15 @@ from bench.cases import (
     run_cli,
     world_cases,
 )
-from bench.report import jsonable, machine_info, markdown_table, save_figure, write_csv, write_json
+from bench.report import (
+    cost_ratio,
+    jsonable,
+    machine_info,
+    markdown_table,
+    save_figure,
+    write_csv,
+    write_json,
+)
 from service.core.schemas import Objective
 from service.memory import settle
 from service.solvers.exact import solve
@@ -113,7 +121,7 @@ def judged(case: Case, rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
             {
                 **r,
                 "ref_cost": ref,
-                "ratio": ref / r["cost"] if r["cost"] > 0 else 1.0,
+                "ratio": cost_ratio(ref, r["cost"]),
                 "proven": r["claimed"] and at_ref,
                 "wrong_proof": r["claimed"] and not at_ref,
             }

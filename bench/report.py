@@ -52,6 +52,12 @@ PERCENTILES = (50, 95)
 _PACKAGES = ("numpy", "numba", "ortools", "pydantic")
 
 
+def cost_ratio(opt: float, cost: float) -> float:
+    """opt / cost, 1 at the optimum; 1 where the cost is 0 (avg_delay with no delay needed:
+    then the optimum is 0 too)."""
+    return opt / cost if cost > 0 else 1.0
+
+
 def delay_ratio(opt: float, cost: float, free: float) -> float:
     """(opt - free) / (cost - free), 1 at the optimum; NaN where free is no lower bound."""
     tol = 1e-9 * max(1.0, abs(opt))
