@@ -124,19 +124,25 @@ def _cpsat_unproven(monkeypatch: pytest.MonkeyPatch, answer: Assignments) -> lis
 
 
 def test_cpsat_gets_its_share_and_the_milp_the_rest(monkeypatch: pytest.MonkeyPatch) -> None:
-    """CP-SAT searches for 1 - MILP_STAGE_SHARE of the stage's time, the MILP until its
-    deadline; where CP-SAT proves, the MILP never runs."""
+    """CP-SAT searches for 1 - MILP_STAGE_SHARE of the stage's time (at least
+    MILP_STAGE_CPSAT_LEAST_S), the MILP until its deadline; where CP-SAT proves, or the
+    stage is no longer than CP-SAT's least, the MILP never runs."""
     ctx = _context(0)
     worst, best = _worst_and_best(0)
     cpsat = _cpsat_unproven(monkeypatch, _single(worst))
     milp = _fake_milp(monkeypatch, _single(best), best.costs["avg_delay"])
     found, verdict = improve(ctx, _start(ctx, worst), 2.0)
     assert found.optimal and verdict == f"proven optimal by {MILP_NAME}"
-    assert cpsat == [pytest.approx(2.0 * (1 - exact.MILP_STAGE_SHARE))]
-    assert len(milp) == 1 and 2.0 * exact.MILP_STAGE_SHARE - 0.1 < milp[0] <= 2.0
+    cpsat_s = max(2.0 * (1 - exact.MILP_STAGE_SHARE), exact.MILP_STAGE_CPSAT_LEAST_S)
+    assert cpsat == [pytest.approx(cpsat_s)]
+    assert len(milp) == 1 and 2.0 - cpsat_s - 0.1 < milp[0] <= 2.0  # the rest: CP-SAT was quick
     monkeypatch.setattr(exact, "solve", lambda *a, **k: ExactResult(_single(best), True, 0.0))
     found, verdict = improve(ctx, _start(ctx, worst), 2.0)
     assert found.optimal and verdict == "proven optimal by CP-SAT" and len(milp) == 1
+    cpsat = _cpsat_unproven(monkeypatch, _single(worst))
+    found, _ = improve(ctx, _start(ctx, worst), exact.MILP_STAGE_CPSAT_LEAST_S)
+    assert not found.optimal and len(milp) == 1
+    assert cpsat == [pytest.approx(exact.MILP_STAGE_CPSAT_LEAST_S)]
 
 
 @pytest.mark.parametrize("objective", ["avg_completion", "max_completion", "sync_completion"])
