@@ -1,12 +1,14 @@
 """A time-stepped reference of the dependency executor, for tests only.
 
 Plain Python, fixed wall-time step, no events: at every step each started robot
-advances its progress clock by ``rate x dt`` (the rate read at the step's middle),
-but never past the planned time of its nearest unsatisfied wait point; then every
-constraint whose waitee has reached ``until_s`` (or finished) is satisfied for good.
-A robot finishes when its clock reaches its planned finish (the crossing time is
-interpolated inside the step). Each dependency hop can lag by about one step, so
-it agrees with the exact executor up to a few steps.
+advances its progress clock by its rate's integral over the step (``Rate.progress``,
+tested on its own), but never past the planned time of its nearest unsatisfied wait
+point; then every constraint whose waitee has reached ``until_s`` (or finished) is
+satisfied for good. A robot finishes when its clock reaches its planned finish, at the
+time its rate gives inside the step (``Rate.advance``). Each dependency hop can lag by
+about one step, so it agrees with the exact executor up to a few steps. (With the rate
+read at the step's middle instead, a stop beginning within a step of a robot's finish
+was skipped: the reference finished it a whole stop earlier than the executor.)
 """
 
 from __future__ import annotations
@@ -28,14 +30,6 @@ class StepResult:
 
     completion: list[float]
     stuck: tuple[int, ...]
-
-
-def _rate_at(rate: Rate, t: float) -> float:
-    """The rate in force at wall time t (1 outside the pieces)."""
-    for k in range(rate.value.size):
-        if rate.edges[k] <= t < rate.edges[k + 1]:
-            return float(rate.value[k])
-    return 1.0
 
 
 def _clock(path: RobotPath, s: float) -> float:
@@ -76,11 +70,11 @@ def step_execute(
             for c in range(plan.size):
                 if waiter[c] == r and not satisfied[c]:
                     limit = min(limit, wait_clock[c])
-            rate = _rate_at(rates[r], t + dt / 2)
-            new = min(clock[r] + rate * dt, limit)
-            if new >= path.finish_time and rate > 0:
+            gain = rates[r].progress(t, t + dt)
+            new = min(clock[r] + gain, limit)
+            if new >= path.finish_time and gain > 0:
                 done[r] = True
-                completion[r] = t + (path.finish_time - clock[r]) / rate
+                completion[r] = rates[r].advance(t, path.finish_time - clock[r])
             clock[r] = max(clock[r], new)
         t += dt
         release(t)

@@ -262,6 +262,18 @@ def test_executor_agrees_with_a_time_stepped_reference(
     _assert_never_faster(paths, run)
 
 
+def test_the_reference_keeps_a_stop_that_begins_within_a_step_of_the_finish() -> None:
+    """a (1 m/s, 4 m) stops from t=3.999 for 1 s: it finishes at 5.0, by the executor and
+    by the reference (which once read the rate at each step's middle and finished it at
+    4.0, skipping the stop: a falsifying example of the test above in CI)."""
+    paths = _paths(robot("a", [[0.0, 0.0], [4.0, 0.0]]))
+    rates = [Rate.of([(3.999, 1.0, 0.0)])]
+    run = execute(paths, DependencyPlan.empty(), rates)
+    ref = step_execute(paths, DependencyPlan.empty(), rates, STEP_DT, 30.0)
+    assert run.completion[0] == pytest.approx(5.0, abs=1e-9)
+    assert ref.completion[0] == pytest.approx(5.0, abs=STEP_DT)
+
+
 # ---- pausing and continuing under another plan ----------------------------------------
 
 
