@@ -67,7 +67,7 @@ from service.solvers.cpsat_arrays import (
     solution_of,
 )
 from service.solvers.fcfs import fcfs
-from service.solvers.milp import solve_milp
+from service.solvers.milp import MilpResult, solve_milp
 from service.solvers.registry import SolveContext, SolverOutput, register
 
 __all__ = [
@@ -782,7 +782,7 @@ def improve(
     where proven, and a verdict for the answer's detail. For MILP_STAGE_OBJECTIVES up to
     MILP_STAGE_MAX_CONFLICTS conflicts, CP-SAT gets 1 - MILP_STAGE_SHARE of the time (at
     least MILP_STAGE_CPSAT_LEAST_S) and, where it has not proven optimality, the MILP
-    backend the rest (see MILP_STAGE_SHARE and :func:`_milp_stage`)."""
+    backend the rest (see MILP_STAGE_SHARE and :func:`_milp_proof_holds`)."""
     deadline = time.monotonic() + time_limit_s
     staged = (
         ctx.objective in MILP_STAGE_OBJECTIVES
@@ -800,60 +800,49 @@ def improve(
         hint=start.assignment,
         on_solution=ctx.on_solution,
     )
-    if result is not None and result.optimal:
-        return _kept_or_hint(ctx, start, result.assignment, "CP-SAT", proven=True)
-    milp = _milp_stage(ctx, deadline) if milp_s > 0 else None
+    cpsat_proven = result is not None and result.optimal
     found = [] if result is None else [(result.assignment, "CP-SAT")]
-    found += [] if milp is None else [(milp[0], MILP_NAME)]
+    milp = None
+    if milp_s > 0 and not cpsat_proven:
+        milp = solve_milp(
+            ctx.problem, ctx.cliques, ctx.evaluator, ctx.objective, deadline - time.monotonic()
+        )
+        found += [] if milp is None else [(milp.assignment, MILP_NAME)]
     if not found:
         return replace(start, optimal=False), "CP-SAT found nothing"
-    k, proven = 0, milp is not None and milp[1]
-    if len(found) == 2:  # CP-SAT's and the MILP's: the cheaper
-        costs = [ctx.cost(answer) for answer, _ in found]
-        # The MILP's proof holds only where CP-SAT's answer is not cheaper (else HiGHS erred).
-        proven = proven and costs[1] <= costs[0] * (1 + MILP_COST_TOL)
-        k = 1 if proven else int(np.argmin(costs))
-    return _kept_or_hint(ctx, start, *found[k], proven=proven)
-
-
-MILP_NAME = "the MILP backend (HiGHS)"
-
-
-def _kept_or_hint(
-    ctx: SolveContext, start: SolverOutput, found: Assignments, by: str, proven: bool
-) -> tuple[SolverOutput, str]:
-    """``found`` (by the search named ``by``, proven optimal or not) against the hint
-    ``start``: the cheaper by the one evaluator, with the verdict. The hint where ``found``
-    costs more, even proven: CP-SAT's integer time scaling may lose the hint's optimum."""
-    both = Assignments(
-        np.concatenate([found.a_first, start.assignment.a_first]),
-        np.concatenate([found.following, start.assignment.following]),
-    )
-    costs = ctx.evaluator.evaluate(both).costs[ctx.objective]  # (2,) found, the hint
-    cost, hinted = float(costs[0]), float(costs[1])
-    if cost > hinted:
+    every = [start.assignment, *(answer for answer, _ in found)]
+    costs = ctx.evaluator.evaluate(
+        Assignments(
+            np.concatenate([a.a_first for a in every]),
+            np.concatenate([a.following for a in every]),
+        )
+    ).costs[ctx.objective]  # (1 + F,) the hint, then each answer found
+    hinted, mine = float(costs[0]), costs[1:]
+    k, proven = int(np.argmin(mine)), cpsat_proven  # ties: CP-SAT's, found first
+    if milp is not None and _milp_proof_holds(milp, float(mine[-1]), float(mine.min())):
+        k, proven = len(found) - 1, True
+    answer, by = found[k]
+    cost = float(mine[k])
+    if cost > hinted:  # even proven: CP-SAT's integer time scaling may lose the hint's optimum
         return replace(start, optimal=False), f"{by} did not improve"
     if proven:
         verdict = f"proven optimal by {by}"
     else:
         verdict = f"improved by {by}" if cost < hinted else f"{by} kept it, unproven"
-    return replace(start, assignment=found, optimal=proven), verdict
+    return replace(start, assignment=answer, optimal=proven), verdict
 
 
-def _milp_stage(ctx: SolveContext, deadline: float) -> tuple[Assignments, bool] | None:
-    """The MILP backend until ``deadline`` (monotonic) -> its answer and whether its proof
-    holds (None: it found none). The proof is taken only where its objective value is the
-    one evaluator's cost of its answer (relative MILP_COST_TOL): HiGHS has returned wrong
-    optima on these models with presolve on (it runs with presolve off), and the
-    assignment is what the service answers, not HiGHS's continuous delays."""
-    found = solve_milp(
-        ctx.problem, ctx.cliques, ctx.evaluator, ctx.objective, deadline - time.monotonic()
-    )
-    if found is None:
-        return None
-    cost = ctx.cost(found.assignment)
-    holds = found.optimal and abs(cost - found.objective) <= MILP_COST_TOL * max(1.0, abs(cost))
-    return found.assignment, holds
+MILP_NAME = "the MILP backend (HiGHS)"
+
+
+def _milp_proof_holds(milp: MilpResult, cost: float, least: float) -> bool:
+    """Whether the MILP's claim of optimality for its answer, of evaluator ``cost``, holds:
+    its objective value is that cost (relative MILP_COST_TOL; HiGHS has returned wrong
+    optima on these models with presolve on, and the assignment is what the service
+    answers, not HiGHS's continuous delays) and no other answer found costs less than
+    it (``least``, else HiGHS erred)."""
+    agrees = abs(cost - milp.objective) <= MILP_COST_TOL * max(1.0, abs(cost))
+    return milp.optimal and agrees and cost <= least * (1 + MILP_COST_TOL)
 
 
 @register("exact")
