@@ -652,6 +652,30 @@ class Evaluator:
         weight[-1] = 0.0  # robots with no event
         return weight
 
+    def held_weights(self, objective: Objective) -> np.ndarray:
+        """(E+1,) the events a search that re-plans a few robots holds every other robot's
+        part of the objective by (``held`` of :meth:`evaluate_with_latest`), weighted in
+        the objective's units: :meth:`objective_weights`, except for avg_delay, each
+        robot's completion event weighing the robot's whole part (its events' weights
+        summed). avg_delay weighs every event, so holding them all leaves no held event
+        any room (its latest delay is its least): held by completion, a robot whose
+        completion waits for a later wait may wait longer on its way, which costs its
+        part a little and frees the robots it meets; the one evaluation decides. Measured
+        (session 50, docs/benchmarks.md "Room for held robots under avg_delay").
+
+        Raises:
+            ValueError: ``objective`` is not a sum over robots.
+        """
+        weight = self.objective_weights(objective)
+        if objective != "avg_delay":
+            return weight
+        event_robot = self.problem.tp_robot[self.problem.events]  # (E,)
+        part = np.bincount(event_robot, weight[:-1], self.problem.n_robots)  # (R,)
+        held = np.zeros_like(weight)
+        held[self._last_event] = part
+        held[-1] = 0.0  # robots with no event
+        return held
+
     def cost_weights(
         self, objective: Objective, evaluation: Evaluation, sample: int = 0
     ) -> np.ndarray:

@@ -33,7 +33,9 @@ always hold.
 A picked robot waits for a held partner's least time, and may pass first as long as
 the partner is then delayed no further than its *latest* delay
 (:meth:`~service.core.evaluate.Evaluator.latest_delays` of the incumbent): the latest
-that leaves every robot's part of the objective where it was. A held robot that waits
+that leaves every robot's part of the objective where it was (for avg_delay, whose every
+event weighs, every robot's completion: see
+:meth:`~service.core.evaluate.Evaluator.held_weights`). A held robot that waits
 further on can be delayed for free up to that wait; where robots queue, that is where
 the room is (on generated warehouses of 100-250 robots, a third of the events have
 some). Delays up to the latest never add up to more (a schedule below the latest stays
@@ -45,7 +47,8 @@ past its latest, at a price per unit past it (PUSH): a trade the held times alon
 allow (one robot's gain against another's loss), which the evaluation then prices
 exactly; the partner's held times are not moved for the robots put back after it.
 Objectives: the sums, as :mod:`service.solvers.lns` (avg_completion, avg_delay;
-for avg_delay every event is in the objective, so no event has room); a passage
+for avg_delay the held robots' events before their completion may then wait longer,
+which costs their part a little: the evaluation counts it); a passage
 minimises its robot's last delay, which for avg_delay is a proxy that the evaluation
 corrects. Deterministic for a seed where the steps are capped (``max_steps``).
 
@@ -831,8 +834,8 @@ class _Incumbent:
         """``answer`` with its evaluation, a topological order ``pos`` (V,) of its node
         graph (re-ranked to 0..V-1: repairs split gaps, which would shrink without end),
         its ``latest`` delays (E+1,) (:meth:`~service.core.evaluate.Evaluator.latest_delays`
-        holding the objective's events) and its following-type ``counts`` (Q,) per clique
-        (None: counted here)."""
+        holding the events of :meth:`~service.core.evaluate.Evaluator.held_weights`) and
+        its following-type ``counts`` (Q,) per clique (None: counted here)."""
         if counts is None:
             counts = ctx.cliques.following_counts(answer.following)[0]
         return cls(
@@ -882,11 +885,12 @@ def reinsert_search(
     config = ReinsertConfig() if config is None else config
     st = _Static.of(ctx)
     weight = ctx.evaluator.objective_weights(ctx.objective)
+    held = ctx.evaluator.held_weights(ctx.objective)  # (E+1,) what holds the others
     budget = ctx.cliques.budget.astype(np.int64)
     rng = np.random.default_rng(seed)
     rank = ctx.orientation.topological_rank(start.a_first[0])
     slope = np.empty(weight.size)
-    evaluation, latest = ctx.evaluator.evaluate_with_latest(start, weight, slope)
+    evaluation, latest = ctx.evaluator.evaluate_with_latest(start, held, slope)
     if rank is None or latest is None:
         raise ValueError("the answer to search from closes a cycle")
     current = _Incumbent.of(ctx, start, evaluation, rank, latest, slope)
@@ -920,7 +924,7 @@ def reinsert_search(
         )
         steps += 1
         below = current.cost + _tolerated(temperature, rng)
-        kept = None if found is None else _kept(ctx, current, *found, weight, below)
+        kept = None if found is None else _kept(ctx, current, *found, held, below)
         if kept is None or kept.cost >= best_cost:
             stalled += 1
             current = current if kept is None else kept
@@ -1230,17 +1234,18 @@ def _kept(
     current: _Incumbent,
     found: Assignments,
     pos: np.ndarray,
-    weight: np.ndarray,
+    held: np.ndarray,
     below: float,
 ) -> _Incumbent | None:
     """``found`` (node positions ``pos`` (V,)) as the new incumbent, its latest delays
-    holding the objective's events (``weight`` (E+1,), which also weighs its slopes), if
+    holding the ``held`` (E+1,) events (which also weigh its slopes;
+    :meth:`~service.core.evaluate.Evaluator.held_weights`), if
     the evaluator finds it cheaper than ``below``;
     None otherwise, and (a guard: repairs exclude both by construction) if ``pos`` is
     not a topological order of its node graph or a density clique holds more
     following-type conflicts than its budget."""
-    slope = np.empty(weight.size)
-    evaluation, latest = ctx.evaluator.evaluate_with_latest(found, weight, slope)
+    slope = np.empty(held.size)
+    evaluation, latest = ctx.evaluator.evaluate_with_latest(found, held, slope)
     if latest is None or not float(evaluation.costs[ctx.objective][0]) < below:
         return None
     if not _ordered(_Static.of(ctx), found.a_first[0], pos):

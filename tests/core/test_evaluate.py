@@ -621,6 +621,39 @@ def test_objective_weights_sum_the_objectives(seed: int) -> None:
             ev.objective_weights(objective)
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_held_weights_hold_avg_delay_by_each_robots_completion(seed: int) -> None:
+    """avg_completion holds its own weights; avg_delay each robot's completion event,
+    weighing the robot's events' weights summed (the same total), so that a held robot
+    may wait longer on its way where its completion waits for a later wait (its latest
+    delays there above its least), which holding every event never allows."""
+    problem = _problem(stitched_problem(seed, 12, 3.0) if seed % 2 else small_problem(seed))
+    ev = Evaluator(problem)
+    np.testing.assert_array_equal(
+        ev.held_weights("avg_completion"), ev.objective_weights("avg_completion")
+    )
+    weight, held = ev.objective_weights("avg_delay"), ev.held_weights("avg_delay")
+    last = ev.objective_weights("avg_completion") > 0  # (E+1,) the completion events
+    assert (held[~last] == 0).all() and (held[last] > 0).all()
+    event_robot = problem.tp_robot[problem.events]  # (E,)
+    np.testing.assert_allclose(
+        np.bincount(event_robot, held[:-1], problem.n_robots),
+        np.bincount(event_robot, weight[:-1], problem.n_robots),
+    )
+    assignment = _random_batch(problem, seed, 1)
+    evaluation = ev.evaluate(assignment)
+    if not evaluation.converged[0]:
+        return
+    every = ev.latest_delays(assignment, evaluation, weight > 0)
+    by_completion = ev.latest_delays(assignment, evaluation, held > 0)
+    np.testing.assert_allclose(every[:-1], evaluation.event_delay[0, :-1])  # no room
+    assert (by_completion >= every - 1e-9).all()
+    assert (by_completion > every + 1e-9).any()  # these seeds' answers have room
+    for objective in ("max_completion", "sync_completion"):
+        with pytest.raises(ValueError, match="sum"):
+            ev.held_weights(objective)
+
+
 def test_an_empty_batch_has_empty_results() -> None:
     problem = _problem(small_problem(3))
     empty = np.zeros((0, problem.n_conflicts), dtype=bool)

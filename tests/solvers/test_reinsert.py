@@ -69,7 +69,7 @@ def _incumbent(ctx: SolveContext) -> reinsert._Incumbent:
     start = plain_start(ctx)
     rank = ctx.orientation.topological_rank(start.a_first[0])
     assert rank is not None
-    held = ctx.evaluator.objective_weights(ctx.objective)
+    held = ctx.evaluator.held_weights(ctx.objective)
     slope = np.empty(held.size)
     evaluation, latest = ctx.evaluator.evaluate_with_latest(start, held, slope)
     assert latest is not None
