@@ -103,7 +103,8 @@ def conformance_cases(
     """The first ``per_set`` problems (all: None) of each named conformance set, in order.
 
     ``objective`` replaces each request's own; the proven optimum then no longer
-    applies (``ref_cost`` None: measure against the best found).
+    applies (``ref_cost`` None: measure against the best found), and the case's name
+    ends in that objective (the sets' names end in the request's own).
     """
     cases = []
     for name in sets:
@@ -116,9 +117,17 @@ def conformance_cases(
                     case_of(name, rec["name"], request, rec["ref_cost"], rec["ref_runtime_s"])
                 )
             else:
+                posed = _posed_name(rec["name"], request.objective, objective)
                 request = request.model_copy(update={"objective": objective})
-                cases.append(case_of(name, rec["name"], request))
+                cases.append(case_of(name, posed, request))
     return cases
+
+
+def _posed_name(name: str, own: str, objective: str) -> str:
+    """A conformance problem's ``name`` for it posed for ``objective``: its last part
+    replaced where that is the request's ``own`` objective, else the objective appended."""
+    base, _, last = name.rpartition("/")
+    return f"{base}/{objective}" if base and last == own else f"{name}/{objective}"
 
 
 def _derived(kind: str, robots: int, seed: int, objective: str) -> dict[str, Any]:

@@ -124,9 +124,12 @@ EXACT_TIME_PER_BUILD = 4
 # wh_parked/250/21 0.901-0.919 (LNS worse there, where no plan was found). At 3 s (2.1 s
 # left) on the two-lane ones 0.851 -> 0.856 (even). So LNS from 3 s left, 0.015 s per
 # conflict per robot (2.6 s at ~175): budgets from 4.3 s at 250 robots. Not for
-# avg_delay, where every event is in the objective and no held robot has room: the same
-# six worlds at 5 s, LNS's cost 1.034x the turns' (worse in 10 of 12 runs); it keeps
-# session 26's rule. Per objective: (s per conflict per robot, least s) left.
+# avg_delay: the same six worlds at 5 s, LNS's cost 1.034x the turns' (worse in 10 of 12
+# runs); again (session 50, ``python -m bench.ab --objective avg_delay``, three worlds a
+# kind, two seeds) 0.8770 / 0.8342 (turns / LNS; 11 / 1), and, once the held robots of
+# both searches were held by their completions (``Evaluator.held_weights``; LNS's not
+# kept), 0.9554 / 0.9598 (4 / 8): even. It keeps session 26's rule. Per objective: (s per
+# conflict per robot, least s) left.
 LARGE_LNS_RULE = {"avg_completion": (0.015, 3.0), "avg_delay": (0.03, 4.0)}
 LARGE_LNS_ROBOTS = 4
 # LNS's sub-problems keep the held robots in the incumbent's topological order up to
@@ -197,7 +200,10 @@ REINSERT_SHARE = 0.43
 # both kinds better), 10 s 0.9894 / 0.9849 (3 / 3; two-way 0.981 / 0.991, two-lane 0.998 /
 # 0.979), at 5 s on wh_one_way, wh_mixed and wh_parked of 100 0.9618 / 0.9456 (7 / 5):
 # the turns take its budgets whole. (At 5 s for avg_completion, LNS stays: 0.9530 / 0.9819
-# on the two-way and two-lane ones, 2 / 10; 0.9548 / 0.9863 on those three kinds.)
+# on the two-way and two-lane ones, 2 / 10; 0.9548 / 0.9863 on those three kinds.) Again
+# in session 50, with both searches' held robots held by their completions
+# (``Evaluator.held_weights``), avg_delay at 5 s on wh_two_way, wh_two_lane, wh_one_way and
+# wh_mixed of 100 (two worlds, two seeds): 0.9731 / 0.9627 (10 / 6): still none.
 # Seconds left at least, by objective.
 MID_LNS_LEAST_S = {"avg_completion": 2.0, "avg_delay": math.inf}
 # From MID_TURNS_MIN_CONFLICTS (and above ``exact_max_conflicts``) to below

@@ -38,6 +38,8 @@ def test_generated_worlds_measure_against_the_best_found_conformance_against_the
     assert rows[0]["ratio"] == pytest.approx(1 / 1.1)
     (other,) = conformance_cases(("wh_25",), per_set=1, objective="max_completion")
     assert other.objective == "max_completion" and other.ref_cost is None
+    assert case.name.endswith("/avg_completion")  # the set's own objective, then the posed one
+    assert other.name == case.name.removesuffix("avg_completion") + "max_completion"
     generated = replace(case, ref_cost=None, ref_runtime_s=None)
     rows = measured(generated, [_raw("tabu", 12.0), _raw("exact", 10.0, optimal=True)])
     assert [r["ref_cost"] for r in rows] == [10.0, 10.0]
