@@ -606,8 +606,9 @@ def test_partners_are_drawn_by_the_critical_binding_waits(
     ctx: SolveContext, critical: bool
 ) -> None:
     """An incumbent's blocking conflicts are its binding waits critical to the cost (from
-    the latest delays the search keeps), found anew by the evaluator; every binding wait
-    without CRITICAL_BLOCKING."""
+    the latest delays the search keeps: holding the held weights' events, for avg_delay
+    the robots' completions), found anew by the evaluator; every binding wait without
+    CRITICAL_BLOCKING."""
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(reinsert, "CRITICAL_BLOCKING", critical)
         current = _incumbent(ctx)
@@ -615,5 +616,7 @@ def test_partners_are_drawn_by_the_critical_binding_waits(
     evaluation = ctx.evaluator.evaluate(answer)
     expected = ctx.evaluator.binding(answer, evaluation)
     if critical:
-        expected &= ctx.evaluator.critical_waits(answer, evaluation, ctx.objective)
+        held = ctx.evaluator.held_weights(ctx.objective) > 0  # (E+1,)
+        latest = ctx.evaluator.latest_delays(answer, evaluation, held)
+        expected &= ctx.evaluator.critical_waits(answer, evaluation, ctx.objective, latest)
     np.testing.assert_array_equal(current.blocking, expected)
