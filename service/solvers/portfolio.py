@@ -21,7 +21,8 @@ comes first, improving in stages:
    ~1-4 ms a step) and priority search in turns (:mod:`service.solvers.turns`), with
    REINSERT_SHARE of the time left, or to the deadline where no later stage runs. Below
    ``lns_min_conflicts`` too, from MID_TURNS_MIN_CONFLICTS, where less than
-   MID_TURNS_BELOW_S are left: the plans and the turns, with MID_TURNS_SHARE;
+   MID_TURNS_BELOW_S are left (avg_delay: at every budget): the plans and the turns, with
+   MID_TURNS_SHARE;
 3. **large-neighbourhood search** (above ``exact_max_conflicts`` up to
    ``exact_stage_max_conflicts``, for the objectives that are sums): CP-SAT re-plans
    a few robots at a time from the best answer so far (:mod:`service.solvers.lns`).
@@ -207,8 +208,8 @@ REINSERT_SHARE = 0.43
 # Seconds left at least, by objective.
 MID_LNS_LEAST_S = {"avg_completion": 2.0, "avg_delay": math.inf}
 # From MID_TURNS_MIN_CONFLICTS (and above ``exact_max_conflicts``) to below
-# ``lns_min_conflicts``, with less than MID_TURNS_BELOW_S left at the start (avg_completion,
-# avg_delay; not a re-schedule), the first stage is the plans then re-insertion and
+# ``lns_min_conflicts``, with less than MID_TURNS_BELOW_S of its objective left at the start
+# (avg_completion, avg_delay; not a re-schedule), the first stage is the plans then re-insertion and
 # priority search in turns for MID_TURNS_SHARE of the time left, in place of the policy's
 # large solver (priority_tabu); LNS and the CP-SAT stage follow as after it. Where LNS
 # converges on a local optimum (a plateau at the whole fleet unproven) the CP-SAT stage
@@ -222,8 +223,16 @@ MID_LNS_LEAST_S = {"avg_completion": 2.0, "avg_delay": math.inf}
 # - 1.0000 either way (62 / 63 of 144 runs proven); avg_delay (two seeds) two-way 0.966 /
 # 0.896, sparse floors 0.984 / 0.967, but two-lane 0.984 / 0.999 (0 / 2) and dense floors
 # 0.989 / 1.000 (0 / 2): below 200 conflicts the plain order keeps them. Measured with
-# MID_TURNS_SHARE 0.3 in session 41: fewer proofs at 5 s; so short budgets only.
-MID_TURNS_BELOW_S = 2.0
+# MID_TURNS_SHARE 0.3 in session 41: fewer proofs at 5 s; so short budgets only, for
+# avg_completion. avg_delay at every budget since re-insertion holds its robots by their
+# completions (``Evaluator.held_weights``): measured (session 50, ``python -m bench.ab
+# --objective avg_delay``, 5 s, 2.0 against every budget; wh_two_way 25, floor_sparse 50,
+# wh_two_way 50, wh_one_way 50, three worlds, and the sets wh_100, geo_dense_25, one seed)
+# 0.9903 / 0.9998 (2 cheaper, 7 dearer of 24; proven 12 / 12), on other worlds (`--seed
+# 500000`, those kinds, wh_two_lane 25, wh_mixed 50, floor_dense 25, two worlds, two
+# seeds) 0.9722 / 0.9863 (5 / 12; proven 8 / 8); avg_completion the same way 0.9973 /
+# 0.9972 (3 / 4; proven 14 / 14). Seconds left at the start, below which, by objective.
+MID_TURNS_BELOW_S = {"avg_completion": 2.0, "avg_delay": math.inf}
 MID_TURNS_SHARE = 0.1
 MID_TURNS_MIN_CONFLICTS = 200
 # From ``lns_min_conflicts`` conflicts the first stage is the cheapest of PLANNED_ORDERS
@@ -328,13 +337,13 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
         and problem.n_conflicts > ctx.exact_max_conflicts
         and problem.n_conflicts >= ctx.lns_min_conflicts
     )
-    mid_turns = (  # the turns as a short budget's first stage below lns_min_conflicts
+    mid_turns = (  # the turns as a (short) budget's first stage below lns_min_conflicts
         ctx.objective in REINSERT_OBJECTIVES
         and max(ctx.exact_max_conflicts + 1, MID_TURNS_MIN_CONFLICTS)
         <= problem.n_conflicts
         < ctx.lns_min_conflicts
         and ctx.warm is None
-        and deadline - time.monotonic() < MID_TURNS_BELOW_S
+        and deadline - time.monotonic() < MID_TURNS_BELOW_S[ctx.objective]
     )
     # A re-schedule starts from its previous answer (tabu search, below), not from plans.
     plans, planned = (reinserts or mid_turns) and ctx.warm is None, None

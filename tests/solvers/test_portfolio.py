@@ -260,7 +260,7 @@ def test_a_short_budget_below_lns_min_conflicts_starts_with_the_turns(
 
     monkeypatch.setattr(portfolio, "take_turns", recorded)
     monkeypatch.setattr(portfolio, "lns_search", lns_recorded)
-    monkeypatch.setattr(portfolio, "MID_TURNS_BELOW_S", below_s)
+    monkeypatch.setattr(portfolio, "MID_TURNS_BELOW_S", {"avg_completion": below_s})
     monkeypatch.setattr(portfolio, "MID_TURNS_MIN_CONFLICTS", min_conflicts)
     line = json.loads((DATA / "wh_25.jsonl").read_text().splitlines()[0])
     body = {**line["request"], "options": {"solver": "auto", "time_limit_s": 1.0}}
@@ -278,6 +278,27 @@ def test_a_short_budget_below_lns_min_conflicts_starts_with_the_turns(
     assert searched == [True]
     assert answer.cost >= line["ref_cost"] * (1 - 1e-9)
     assert answer.checks.acyclic and answer.checks.density
+
+
+@pytest.mark.parametrize("objective", ["avg_completion", "avg_delay"])
+def test_avg_delay_starts_with_the_turns_at_longer_budgets_too(
+    objective: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """MID_TURNS_BELOW_S by objective: with 2.5 s, between exact_max_conflicts and
+    lns_min_conflicts, avg_delay starts with the plans and the turns, avg_completion with
+    the large solver (from 2 s)."""
+    import service.solvers.portfolio as portfolio
+
+    monkeypatch.setattr(portfolio, "MID_TURNS_MIN_CONFLICTS", 0)
+    line = json.loads((DATA / "wh_25.jsonl").read_text().splitlines()[0])
+    options = {"solver": "auto", "time_limit_s": 2.5}
+    body = {**line["request"], "objective": objective, "options": options}
+    policy = DispatchPolicy(exact_max_conflicts=0, lns_min_conflicts=10_000)
+    detail = dispatch(ScheduleRequest.model_validate(body), policy).solver.detail
+    if objective == "avg_delay":
+        assert detail.startswith("planned") and "priority_tabu" not in detail
+    else:
+        assert "priority_tabu" in detail
 
 
 def test_small_problems_go_straight_to_cp_sat_whatever_lns_min_conflicts_says() -> None:
