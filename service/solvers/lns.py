@@ -39,7 +39,10 @@ graph leaves some unordered.
 A picked robot waits for a held robot's least times, and may pass one first as long
 as that delays it no further than its latest delays
 (:meth:`~service.core.evaluate.Evaluator.latest_delays`, which leave every robot's
-part of the objective where it was), as in :mod:`service.solvers.reinsert`: the held
+part of the objective where it was), as in :mod:`service.solvers.reinsert` (except that
+for avg_delay every event stays held: re-insertion holds only the completions there,
+:meth:`~service.core.evaluate.Evaluator.held_weights`, which LNS's sub-problem, counting
+only the picked robots' delays, left unpriced: measured even to worse, session 50): the held
 robots' part stays, and the sub-problem's own part is exact unless a picked robot
 waits further on for a held robot that a picked robot pushed (the evaluation that
 decides counts that). Times are on CP-SAT's integer grid
