@@ -49,7 +49,7 @@ class Settings(BaseSettings):
     # it proves 25 robots x 2 conflicts (50) in < 0.5 s but not 25 x 4 (100) in 10 s.
     exact_max_conflicts: int = Field(default=60, ge=0)
     # ``auto`` skips its CP-SAT stage above this many conflicts and gives the first stage
-    # (then re-insertion and priority search, or tabu search) the whole budget: measured
+    # (then re-insertion search in turns, or tabu search) the whole budget: measured
     # (docs/benchmarks.md, "Anytime auto"), CP-SAT improved no 250-robot warehouse
     # (12,000-23,000 conflicts) in 10 s, and the 70 % it took there made auto worse with
     # 10 s than with 5 s. (Where the budget leaves it time in proportion to the conflicts

@@ -18,7 +18,7 @@ comes first, improving in stages:
    PLANNED_ORDERS prioritized plans of the whole fleet (milliseconds),
    the instant answer only where no plan is found, then re-insertion search
    (:mod:`service.solvers.reinsert`: neighbourhoods repaired by prioritized planning,
-   ~1-4 ms a step) and priority search in turns (:mod:`service.solvers.turns`), with
+   ~1-4 ms a step) in turns (:mod:`service.solvers.turns`), with
    REINSERT_SHARE of the time left, or to the deadline where no later stage runs. Below
    ``lns_min_conflicts`` too, from MID_TURNS_MIN_CONFLICTS, where less than
    MID_TURNS_BELOW_S are left (avg_delay: at every budget): the plans and the turns, with
@@ -179,10 +179,11 @@ MID_LNS_SHARE = 0.8
 # 0.3 / 0.43 / 0.6 of the time left: 1 s 0.7262 / 0.7310 / 0.7307, 5 s 0.8625 / 0.8674 /
 # 0.8697 (flat). avg_delay (the same 12 warehouses, one seed, paired costs without / with
 # re-insertion): 1.21x at 1 s, 1.15x at 5 s (better on 8 of 12 at each, two-lane 1.1-1.4x,
-# two-way 250 0.97x at 1 s). Since session 26 the stage is re-insertion and priority
+# two-way 250 0.97x at 1 s). From session 26 to 50 the stage was re-insertion and priority
 # search in turns (:mod:`service.solvers.turns`; through the dispatcher, 100-robot
 # warehouses, two seeds, 1 s / 5 s: two-way 0.766 -> 0.832 / 0.874 -> 0.908, two-lane
-# 0.850 -> 0.866 / 0.935 -> 0.921), the share left as it was.
+# 0.850 -> 0.866 / 0.935 -> 0.921), the share left as it was; since session 51 re-insertion
+# alone in turns (see the turns module).
 REINSERT_SHARE = 0.43
 # From ``lns_min_conflicts`` up to ``exact_stage_max_conflicts`` conflicts, LNS follows the
 # re-insertion turns only where the time left before the plans is at least this many
@@ -209,8 +210,8 @@ REINSERT_SHARE = 0.43
 MID_LNS_LEAST_S = {"avg_completion": 2.0, "avg_delay": math.inf}
 # From MID_TURNS_MIN_CONFLICTS (and above ``exact_max_conflicts``) to below
 # ``lns_min_conflicts``, with less than MID_TURNS_BELOW_S of its objective left at the start
-# (avg_completion, avg_delay; not a re-schedule), the first stage is the plans then re-insertion and
-# priority search in turns for MID_TURNS_SHARE of the time left, in place of the policy's
+# (avg_completion, avg_delay; not a re-schedule), the first stage is the plans then the
+# re-insertion turns for MID_TURNS_SHARE of the time left, in place of the policy's
 # large solver (priority_tabu); LNS and the CP-SAT stage follow as after it. Where LNS
 # converges on a local optimum (a plateau at the whole fleet unproven) the CP-SAT stage
 # of one worker rarely leaves it: wh_two_way/25/60 read 0.954 at 5 s, LNS done at 0.9 s.
@@ -382,14 +383,14 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
         turned = take_turns(ctx, best.assignment, cost, until, ctx.seed)
         if turned.cost < cost:
             best, cost = replace(best, assignment=turned.best), turned.cost
-            stages.append(f"re-insertion and priority x{turned.turns}")
+            stages.append(f"re-insertion x{turned.turns} turns")
         if not uses_lns:
             why = (
                 f"above {ctx.exact_stage_max_conflicts} conflicts"
                 if too_large
                 else _lns_from(ctx.objective)
             )
-            verdict = f"re-insertion and priority search to the deadline {why}"
+            verdict = f"re-insertion search to the deadline {why}"
             return replace(best, optimal=False, detail=_detail(stages, verdict))
     if uses_lns:
         left = deadline - time.monotonic()

@@ -55,7 +55,6 @@ from service.solvers.tabu import tabu_search
 __all__ = [
     "PriorityConfig",
     "RankFlips",
-    "answer_ranks",
     "priority_search",
     "priority_tabu",
     "reversed_in",
@@ -114,8 +113,7 @@ class RankFlips:
 
     @classmethod
     def of(cls, ctx: SolveContext) -> RankFlips:
-        """``ctx``'s, built once per context (~3 ms at 22,000 conflicts, which priority
-        search taking turns with re-insertion would pay every turn)."""
+        """``ctx``'s, built once per context (~3 ms at 22,000 conflicts)."""
         cached = ctx.__dict__.get("_rank_flips")
         if cached is None:
             cached = ctx.__dict__["_rank_flips"] = cls(ctx.problem)
@@ -182,10 +180,8 @@ def priority_search(
     budget_s: float,
     seed: int,
     cfg: PriorityConfig = PriorityConfig(),
-    start: tuple[np.ndarray, Assignments, float] | None = None,
 ) -> tuple[Assignments, float, int]:
-    """Search robot offsets from ``start`` (node ranks (V,) that decode to its answer, the
-    answer and its cost; None: the cheapest blend) -> (best, its cost, rounds run).
+    """Search robot offsets from the cheapest blend -> (best, its cost, rounds run).
 
     Stops after ``cfg.patience`` rounds without improvement, after ``cfg.max_rounds`` or
     after ``budget_s`` seconds; deterministic for a seed when it stops on one of the first
@@ -195,7 +191,7 @@ def priority_search(
     deadline = time.perf_counter() + budget_s
     p, decoder, evaluator = ctx.problem, ctx.decoder, ctx.evaluator
     rng = np.random.default_rng(seed)
-    base, best, best_cost = cheapest_blend(ctx) if start is None else start
+    base, best, best_cost = cheapest_blend(ctx)
     flips = RankFlips.of(ctx)
     offsets = np.zeros(p.n_robots)  # (R,) the current (best) offsets
     ranks = decoder.repair(base[None])[0]  # (V,) the current best's repaired ranks
@@ -233,18 +229,6 @@ def priority_search(
     if refit_every:
         best, best_cost = refit_types(decoder, evaluator, ctx.objective, best)
     return best, best_cost, rounds
-
-
-def answer_ranks(ctx: SolveContext, answer: Assignments) -> np.ndarray:
-    """(V,) node ranks that decode to ``answer``'s directions (a batch of one): a
-    topological order of its node graph, spread evenly over the problem's time span (the
-    unit of priority search's offsets), so that a search can go on from any valid answer."""
-    p = ctx.problem
-    rank = ctx.orientation.topological_rank(answer.a_first[0])
-    if rank is None:
-        raise ValueError("the answer closes a cycle")
-    span = float(p.node_exit.max() - p.node_enter.min())
-    return rank.astype(np.float64) * (span / max(p.n_nodes, 1))
 
 
 def shifted_flips(

@@ -1,32 +1,26 @@
-"""Robot-priority search and re-insertion search in turns.
+"""Re-insertion search in turns: restarted from the best answer each turn, one chain per core.
 
-The two searches get stuck in different places. Re-insertion
-(:mod:`service.solvers.reinsert`) re-plans a few robots with every other robot's times
-held, delaying a held robot only where that costs nothing (up to its latest delays):
-before it could do even that, on a dense two-way warehouse of 250 robots (~175
-conflicts per robot) it plateaued at 0.81 of the best known after 20-30 s (the bench's
-slower Xeon), where priority search alone reached 0.88 in 30 s. Priority search
-(:mod:`service.solvers.priority`) shifts one robot's priority against every robot it
-meets, delaying them where that pays, but its random shifts rarely find the fine
-re-orderings re-insertion finds in a step: on a two-lane warehouse of 250 robots it
-reached 0.75 in 30 s, re-insertion 0.89 in 5 s. In turns, each starts from the other's
-answer: priority search from ranks that decode to it
-(:func:`~service.solvers.priority.answer_ranks`), re-insertion from its directions. The
-split of a turn follows the cost each search took off per second in the last one, so
-the search that pays on a fleet gets the time. Measured (docs/benchmarks.md,
-"Re-insertion and priority search in turns"): ``auto`` on the two-way warehouses of 250
-robots 0.61 -> 0.73 at 1 s and 0.79 -> 0.92 at 5 s against re-insertion alone; a fixed
-60/40 split read 0.68 and 0.89.
+``auto``'s large stage (:mod:`service.solvers.portfolio`) runs re-insertion search
+(:mod:`service.solvers.reinsert`) in turns of at most ``turn_s`` and ``turn_share`` of
+the time given. Each turn starts from the best answer so far, so an annealed search that
+wandered off while hot comes back to it; with several cores a turn runs one search per
+core at once, each with a seed of its own, and the cheapest goes on: the turns are where
+the chains meet. Every turn's search cools over the same span (the first COOLED_SHARE of
+the time), then searches cold.
 
-Priority search takes its part only once re-insertion's annealing is cold (the first
-COOLED_SHARE of the time, the turns are re-insertion's alone, each from the best so far):
-its moves paid there no more than the re-insertion steps they took the time of. Measured
-(session 38; ``auto`` through the dispatcher beside same-code controls, docs/benchmarks.md
-"Priority search once re-insertion is cold"): generated warehouses of 250 robots 1 s
-+0.009 / +0.014 (four seeds), 5 s +0.004 / -0.003 (two); of 100 robots even at 1 s,
-+0.003 / +0.011 at 5 s; kinds not tuned on (wh_mixed, wh_one_way of 250) +0.035 at 1 s,
-+0.021 at 5 s; wh_parked even at 1 s, +0.017 at 5 s. Without priority search at all:
-+0.015 at 1 s but -0.005 at 5 s (250 robots).
+Robot-priority search (:mod:`service.solvers.priority`) took a part of every cold turn
+from session 26 to session 50 (its part following the cost each search took off per
+second; from the start of the turns until session 38): then re-insertion never delayed a
+held robot, and priority search's shifts were the one way to trade one robot's delay
+for another's. Since re-insertion may push held robots past their latest at a price
+(``reinsert.PUSH``) and holds them by what the objective reads
+(:meth:`~service.core.evaluate.Evaluator.held_weights`), its time pays more. Measured
+(session 51, ``python -m bench.ab``, ``auto`` with priority search's first part 0.3, as
+shipped, against none; docs/benchmarks.md "Re-insertion alone in the turns"): 1 s,
+generated warehouses of 100 and 250 robots, avg_completion 0.9487 -> 0.9553 (25 of 36
+runs cheaper without), other worlds 0.9714 -> 0.9779 (19 / 17), avg_delay 0.8840 ->
+0.8990 (18 / 6), other kinds and sizes 0.9835 -> 0.9898 (13 / 6); 2 s 0.9636 -> 0.9646;
+5 s 0.9730 -> 0.9752 (16 / 8), avg_delay even; 10 s even.
 """
 
 from __future__ import annotations
@@ -38,7 +32,6 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 from service.core.assignment import Assignments
-from service.solvers.priority import answer_ranks, priority_search
 from service.solvers.registry import SolveContext
 from service.solvers.reinsert import ReinsertResult, reinsert_search
 
@@ -56,27 +49,21 @@ __all__ = ["COOLED_SHARE", "TurnsConfig", "TurnsResult", "take_turns"]
 # 5 s 0.9341 / 0.9319; over 0.7 1 s 0.8472, 5 s 0.9278; over 0.3 1 s 0.8472, 5 s 0.9193.
 # On kinds not tuned on (wh_mixed, wh_one_way, wh_parked at 250 robots): even at both.
 COOLED_SHARE = 0.5
-# Chain k > 0 of a turn's re-insertion (see TurnsConfig.chains) searches with the turn's seed
-# plus k times this: no two chains of the turns of one search share a seed.
+# Chain k > 0 of a turn (see TurnsConfig.chains) searches with the turn's seed plus k times
+# this: no two chains of the turns of one search share a seed.
 CHAIN_SEED_STRIDE = 1_000_003
 
 
 @dataclass(frozen=True)
 class TurnsConfig:
-    """How long a turn lasts and how it is split."""
+    """How long a turn lasts, how re-insertion cools over the turns, and how many chains
+    a turn runs."""
 
     turn_s: float = 0.5  # a turn's length, at most (1 s measured the same)
     turn_share: float = 0.25  # ... and at most this share of the time given
-    # Priority search's part of the first turn: 0.3 since re-insertion may delay held
-    # robots up to their latest (0.6 before; 0.4 measured the same then).
-    priority_share: float = 0.3
-    least_share: float = 0.1  # the least part of a turn either search keeps
     # Re-insertion's annealing cools over this share of the time given, and searches cold
     # for the rest (see COOLED_SHARE).
     cooling_share: float = COOLED_SHARE
-    # Priority search takes turns from the start, not only once re-insertion is cold (see
-    # the module: measured worse at 1 s).
-    priority_while_hot: bool = False
     # Re-insertion searches a turn runs at once, each in a thread from the best answer so far
     # with a seed of its own; the cheapest goes on (None: one per core the solve has,
     # ``SolveContext.workers``). A step's kernels release the GIL, the Python between them
@@ -107,35 +94,21 @@ def take_turns(
     seed: int,
     config: TurnsConfig | None = None,
 ) -> TurnsResult:
-    """Re-insertion then priority search, in turns from the valid ``start`` (of ``cost``)
-    until ``deadline`` (monotonic); each turn's searches get the next seed, and its
-    re-insertion runs in ``config.chains`` threads (one per core of the solve by default).
-    ``config`` None: TurnsConfig's defaults, read at the call (so that ``bench.ab`` can
-    vary them)."""
+    """Re-insertion search in turns from the valid ``start`` (of ``cost``) until
+    ``deadline`` (monotonic), each turn from the best answer so far with the next seed, in
+    ``config.chains`` threads (one per core of the solve by default). ``config`` None:
+    TurnsConfig's defaults, read at the call (so that ``bench.ab`` can vary them)."""
     config = TurnsConfig() if config is None else config
-    best, turns, share = start, 0, config.priority_share
+    best, turns = start, 0
     now = time.monotonic()
     turn_s = min(config.turn_s, config.turn_share * (deadline - now))
     cooling = (now, now + config.cooling_share * (deadline - now))  # then it searches cold
     chains = config.chains or ctx.workers
     with ThreadPoolExecutor(chains) if chains > 1 else nullcontext() as pool:
         while (began := time.monotonic()) < deadline:
-            before, turn_seed, turns = cost, seed + turns, turns + 1
-            # While re-insertion is hot, the turns are its own (see the module).
-            split = share if config.priority_while_hot or began >= cooling[1] else 0.0
-            until = min(deadline, began + (1 - split) * turn_s)
-            found = _reinsertion(ctx, best, until, turn_seed, cooling, pool, chains)
-            best, cost = found.best, found.cost
-            middle, between = time.monotonic(), cost
-            left = min(split * turn_s, deadline - middle)
-            if left <= 0:
-                continue
-            ranks = answer_ranks(ctx, best)
-            # Given less than PriorityConfig.refit_min_s (0.5 s) here, it refits no types.
-            best, cost, _ = priority_search(ctx, left, turn_seed, start=(ranks, best, cost))
-            gains = (before - between, between - cost)
-            spent = (middle - began, time.monotonic() - middle)
-            share = _next_share(config, share, gains, spent)
+            until = min(deadline, began + turn_s)
+            found = _reinsertion(ctx, best, until, seed + turns, cooling, pool, chains)
+            best, cost, turns = found.best, found.cost, turns + 1
     return TurnsResult(best, cost, turns)
 
 
@@ -161,17 +134,3 @@ def _reinsertion(
         for k in range(chains)
     ]
     return min((run.result() for run in runs), key=lambda found: found.cost)
-
-
-def _next_share(
-    config: TurnsConfig, share: float, gains: tuple[float, float], seconds: tuple[float, float]
-) -> float:
-    """Priority search's part of the next turn: halfway from ``share`` to its part of the
-    cost taken off per second in the last turn (``gains`` and ``seconds`` of re-insertion,
-    then of priority search), within ``least_share`` of either end; unchanged where
-    neither took anything off."""
-    rates = [gain / max(spent, 1e-6) for gain, spent in zip(gains, seconds, strict=True)]
-    if sum(rates) <= 0:
-        return share
-    measured = rates[1] / sum(rates)
-    return min(max(0.5 * (share + measured), config.least_share), 1 - config.least_share)

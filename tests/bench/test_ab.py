@@ -39,11 +39,11 @@ def test_a_dataclass_field_is_a_default_of_the_instances_made_while_it_holds() -
         with pytest.raises(ValueError, match="no dataclass"):
             parse_setting(bad)
     before = (TurnsConfig().turn_s, turns.COOLED_SHARE)
-    settings = [s, parse_setting("service.solvers.turns.TurnsConfig.least_share=0.2"),
+    settings = [s, parse_setting("service.solvers.turns.TurnsConfig.turn_share=0.2"),
                 parse_setting("service.solvers.turns.COOLED_SHARE=0.9")]  # fmt: skip
     with applied(settings):
         made = turns.TurnsConfig()
-        assert (made.turn_s, made.least_share) == (0.25, 0.2)
+        assert (made.turn_s, made.turn_share) == (0.25, 0.2)
         assert turns.TurnsConfig(turn_s=1.0).turn_s == 1.0  # an explicit value still wins
         assert turns.COOLED_SHARE == 0.9
     assert turns.TurnsConfig is TurnsConfig

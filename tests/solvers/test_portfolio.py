@@ -192,8 +192,8 @@ def test_from_lns_min_conflicts_re_insertion_follows_the_first_stage(
     lns_follows: bool,
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    """From lns_min_conflicts conflicts (lowered to 0) re-insertion and priority search
-    take turns after the first stage: to the deadline where neither LNS nor CP-SAT
+    """From lns_min_conflicts conflicts (lowered to 0) re-insertion search runs in turns
+    after the first stage: to the deadline where neither LNS nor CP-SAT
     follows (above the cap, LNS not paying; below it, a budget under MID_LNS_LEAST_S of
     the objective), else for REINSERT_SHARE of the time left, then LNS; the answer is
     valid, no better than the proven optimum, and comes within the budget."""
@@ -223,7 +223,7 @@ def test_from_lns_min_conflicts_re_insertion_follows_the_first_stage(
         assert untils[0] < start + 0.9
     else:
         assert untils[0] >= start + 0.95
-        assert "re-insertion and priority search to the deadline" in answer.solver.detail
+        assert "re-insertion search to the deadline" in answer.solver.detail
         below_cap = "LNS from 2 s" if objective == "avg_completion" else "no LNS for avg_delay"
         assert (below_cap if stage_cap is None else "above 10 conflicts") in answer.solver.detail
     if objective == line["request"]["objective"]:

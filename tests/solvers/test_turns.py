@@ -1,7 +1,6 @@
-"""Priority search and re-insertion in turns: priority search goes on from any valid
-answer (ranks that decode to it), and the turns return a valid answer no worse than
-their start, within their deadline (hypothesis over tiny, fixed-direction, small,
-stitched and conformance problems)."""
+"""Re-insertion search in turns: the turns return a valid answer no worse than their
+start, within their deadline (hypothesis over tiny, fixed-direction, small, stitched and
+conformance problems), each turn from the best so far, its chains one per core."""
 
 from __future__ import annotations
 
@@ -10,7 +9,6 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 
-import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -18,11 +16,11 @@ from hypothesis import strategies as st
 from service.core.assignment import Assignments
 from service.core.check import check
 from service.solvers import turns
-from service.solvers.priority import PriorityConfig, answer_ranks, priority_search
 from service.solvers.registry import SolveContext
 from service.solvers.reinsert import ReinsertResult, reinsert_search
 from service.solvers.tabu import plain_start
-from service.solvers.turns import TurnsConfig, _next_share, take_turns
+from service.solvers.turns import TurnsConfig, take_turns
+from service.solvers.turns import _reinsertion as turns_reinsertion
 from tests.solvers.test_reinsert import CONTEXTS, DATA, SLOW, _context
 
 
@@ -31,23 +29,6 @@ def _assert_valid(ctx: SolveContext, answer: Assignments, cost: float) -> None:
     checks = check(ctx.problem, ctx.cliques, answer)
     assert checks.acyclic[0] and checks.density[0] and checks.forced[0]
     assert cost == float(ctx.evaluator.evaluate(answer).costs[ctx.objective][0])
-
-
-@settings(max_examples=40, deadline=None, derandomize=True, suppress_health_check=SLOW)
-@given(ctx=CONTEXTS, seed=st.integers(0, 1000))
-def test_priority_search_goes_on_from_any_valid_answer(ctx: SolveContext, seed: int) -> None:
-    """Ranks of a re-insertion search's answer decode to its directions (fixed ones
-    included), and priority search from them never returns worse or invalid."""
-    if ctx.problem.n_conflicts == 0:
-        return
-    found = reinsert_search(ctx, plain_start(ctx), np.inf, seed, max_steps=10)
-    ranks = answer_ranks(ctx, found.best)  # (V,)
-    assert np.array_equal(ctx.decoder.directions(ranks[None]), found.best.a_first)
-    cfg = PriorityConfig(max_rounds=20)
-    best, cost, rounds = priority_search(ctx, 60.0, seed, cfg, (ranks, found.best, found.cost))
-    assert rounds <= 20
-    assert cost <= found.cost
-    _assert_valid(ctx, best, cost)
 
 
 @settings(max_examples=15, deadline=None, derandomize=True, suppress_health_check=SLOW)
@@ -76,30 +57,6 @@ def test_turns_stop_at_their_deadline_and_take_several() -> None:
     assert found.turns >= 3  # turns of at most a quarter of the time given
 
 
-@settings(max_examples=200, deadline=None, derandomize=True)
-@given(
-    share=st.floats(0.1, 0.9),
-    gains=st.tuples(st.floats(0, 1e3), st.floats(0, 1e3)),
-    seconds=st.tuples(st.floats(1e-4, 1.0), st.floats(1e-4, 1.0)),
-)
-def test_the_split_moves_toward_the_search_that_paid(
-    share: float, gains: tuple[float, float], seconds: tuple[float, float]
-) -> None:
-    """The next split stays within least_share of either end, is unchanged where neither
-    search took anything off, and lies between the last split and priority search's part
-    of the cost taken off per second."""
-    config = TurnsConfig()
-    nxt = _next_share(config, share, gains, seconds)
-    assert config.least_share <= nxt <= 1 - config.least_share
-    rate_r, rate_p = gains[0] / seconds[0], gains[1] / seconds[1]
-    if rate_r + rate_p == 0:
-        assert nxt == share
-        return
-    low, high = sorted((share, rate_p / (rate_r + rate_p)))
-    least, most = config.least_share, 1 - config.least_share
-    assert min(max(low, least), most) - 1e-12 <= nxt <= min(max(high, least), most) + 1e-12
-
-
 def test_reinsertion_cools_over_the_first_share_of_the_turns(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
@@ -124,41 +81,43 @@ def test_reinsertion_cools_over_the_first_share_of_the_turns(
     assert abs((cold_at - warm_from) - 0.25 * (begin + 0.4 - warm_from)) < 1e-9
 
 
-def test_priority_search_waits_until_reinsertion_is_cold(
-    monkeypatch: pytest.MonkeyPatch,
-) -> None:
-    """While re-insertion's annealing is hot, the turns are re-insertion's alone; once it
-    is cold, priority search takes its part of each turn (and from the start where
-    ``priority_while_hot``)."""
-    calls: list[float] = []
-
-    def recorded(*args, **kwargs):
-        calls.append(time.monotonic())
-        return priority_search(*args, **kwargs)
-
-    monkeypatch.setattr(turns, "priority_search", recorded)
-    line = (DATA / "wh_50.jsonl").read_text().splitlines()[0]
-    ctx = _context(json.loads(line)["request"], "avg_completion")
-    start = plain_start(ctx)
-    cost = float(ctx.evaluator.evaluate(start).costs["avg_completion"][0])
-    reinsert_search(ctx, start, np.inf, 0, max_steps=2)  # compiled before the clock runs
-    priority_search(ctx, 0.01, 0, start=(answer_ranks(ctx, start), start, cost))
-    config = TurnsConfig(turn_s=0.05, cooling_share=0.5)
-    begin = time.monotonic()
-    found = take_turns(ctx, start, cost, begin + 0.6, 0, config)
-    assert calls and min(calls) >= begin + 0.3  # cold from half of the time on
-    assert found.turns > len(calls)  # re-insertion alone in the hot turns
-    calls.clear()
-    begin = time.monotonic()
-    take_turns(ctx, start, cost, begin + 0.6, 0, replace(config, priority_while_hot=True))
-    assert calls and min(calls) < begin + 0.1
-
-
 def _wh50() -> tuple[SolveContext, Assignments, float]:
     line = (DATA / "wh_50.jsonl").read_text().splitlines()[0]
     ctx = _context(json.loads(line)["request"], "avg_completion")
     start = plain_start(ctx)
     return ctx, start, float(ctx.evaluator.evaluate(start).costs["avg_completion"][0])
+
+
+def test_each_turn_starts_from_the_best_answer_so_far(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A turn's re-insertion starts from the answer the last turn returned (the best so
+    far: a search returns the cheapest it saw), with the next seed; the turns return the
+    last one."""
+    ctx, start, cost = _wh50()
+    starts: list[Assignments] = []
+    seeds: list[int] = []
+
+    def recorded(ctx, begin, until, seed, **kwargs):
+        starts.append(begin)
+        seeds.append(seed)
+        return reinsert_search(ctx, begin, until, seed, **kwargs)
+
+    monkeypatch.setattr(turns, "reinsert_search", recorded)
+    returned: list[ReinsertResult] = []
+    monkeypatch.setattr(
+        turns, "_reinsertion", lambda *a: returned.append(turns_reinsertion(*a)) or returned[-1]
+    )
+    config = TurnsConfig(turn_s=0.05, chains=1)
+    found = take_turns(ctx, start, cost, time.monotonic() + 0.3, 11, config)
+    assert found.turns == len(starts) == len(returned) >= 3
+    assert starts[0] is start
+    for turn in range(1, found.turns):
+        assert starts[turn] is returned[turn - 1].best
+    assert seeds == [11 + turn for turn in range(found.turns)]
+    assert (found.best, found.cost) == (returned[-1].best, returned[-1].cost)
+    assert found.cost <= cost
+    _assert_valid(ctx, found.best, found.cost)
 
 
 @pytest.mark.parametrize(
