@@ -45,7 +45,10 @@ for avg_delay every event stays held: re-insertion holds only the completions th
 only the picked robots' delays, left unpriced: measured even to worse, session 50): the held
 robots' part stays, and the sub-problem's own part is exact unless a picked robot
 waits further on for a held robot that a picked robot pushed (the evaluation that
-decides counts that). Times are on CP-SAT's integer grid
+decides counts that). A search may pose its sub-problems for another objective than the
+request's (``posed_for``: ``auto`` poses avg_delay's for avg_completion above its CP-SAT
+cap, see ``portfolio.LARGE_LNS_POSED_FOR``); the one evaluator still decides by the
+request's, and no such search claims a proof. Times are on CP-SAT's integer grid
 (:func:`~service.solvers.exact.integer_times`), the held times too (the least and
 latest times of the grid-rounded problem, so that the hint is feasible); every
 accepted answer is re-evaluated exactly.
@@ -76,6 +79,7 @@ from service.core.assignment import Assignments
 from service.core.csr import csr, gather
 from service.core.evaluate import Evaluation, Evaluator
 from service.core.orientation import _leads_to
+from service.core.schemas import Objective
 from service.solvers.cpsat_arrays import (
     INT64_MAX,
     INT64_MIN,
@@ -180,14 +184,18 @@ class _Fleet:
     ti: np.ndarray  # (P,) int64 times on CP-SAT's grid
     horizon: int
     grid: Evaluator  # least delays of the grid-rounded problem
-    held: np.ndarray  # (E+1,) bool events in the objective: their delays bound the latest
+    posed: Objective  # what the sub-problems minimise (the picked robots' part of it)
+    held: np.ndarray  # (E+1,) bool events in that objective: their delays bound the latest
     delay_weight: np.ndarray  # (E,) int weight of each event's delay in avg_delay
     domains: tuple[np.ndarray, ...]  # (M,) each: literal_domains' a_lo, a_hi, f_lo, f_hi
     slots: Slots  # (S,) the time constraints of every live conflict
     slot_robots: np.ndarray  # (S, 2) the robot that waits in each slot, the one it waits for
 
     @classmethod
-    def of(cls, ctx: SolveContext) -> _Fleet:
+    def of(cls, ctx: SolveContext, posed: Objective | None = None) -> _Fleet:
+        """``ctx``'s fleet, its sub-problems posed for ``posed`` (one of LNS_OBJECTIVES;
+        None: the request's objective)."""
+        posed = ctx.objective if posed is None else posed
         p = ctx.problem
         n_robots, n_conf = p.n_robots, p.n_conflicts
         conf_robots = np.stack([p.node_robot[p.conf_a], p.node_robot[p.conf_b]], axis=1)
@@ -211,7 +219,8 @@ class _Fleet:
             ti,
             horizon,
             grid,
-            grid.objective_weights(ctx.objective) > 0,
+            posed,
+            grid.objective_weights(posed) > 0,
             delay_weights(p),
             domains,
             slots,
@@ -372,7 +381,7 @@ class _Neighbourhood:
             a_lit[self.conflicts],
             f_lit[self.conflicts],
             fleet.scale,
-            LINEARIZATION_LEVEL[ctx.objective],
+            LINEARIZATION_LEVEL[fleet.posed],
         )
         # Hint: the current answer (add_hint first: it clears earlier hints).
         self.em.add_hint(
@@ -392,7 +401,7 @@ class _Neighbourhood:
         add_waits(model, slots, a_lit, f_lit, delays)
 
         # Objective: the picked robots' part (the held robots' is a constant).
-        if ctx.objective == "avg_completion":
+        if fleet.posed == "avg_completion":
             last = delay_var[problem.tp_event[problem.last_tp[robots]]]  # (k,) -1: never waits
             minimize(model, last[last >= 0], 1)
         else:  # avg_delay
@@ -632,12 +641,15 @@ def lns_search(
     converge: bool = False,
     robots: int = LNS_ROBOTS,
     held_in_order: bool = False,
+    posed_for: Objective | None = None,
 ) -> LnsResult:
     """LNS from the valid ``start`` until ``deadline`` (monotonic), or with ``converge``
     until a plateau at the largest neighbourhood (min(MAX_ROBOTS, fleet)); at once when a
     step that freed every robot in a conflict (the whole problem: nothing held that
     could wait) is proven optimal. The first neighbourhoods free ``robots`` robots;
-    with ``held_in_order`` they keep the held robots in the incumbent's order.
+    with ``held_in_order`` they keep the held robots in the incumbent's order. Its
+    sub-problems are posed for ``posed_for`` (one of LNS_OBJECTIVES; None: the request's
+    objective), its answers kept by the request's; posed for another, it proves nothing.
 
     ``ctx.workers`` sub-problems are solved at once, each in a thread (CP-SAT releases
     the GIL): while one is solved the next is built, from robots that no running one
@@ -651,7 +663,7 @@ def lns_search(
     0.9322 (two seeds, better on five of six). 1.4-1.7x the steps: the main thread builds
     (~14 ms) while CP-SAT solves (~10-20 ms).
     """
-    fleet = _Fleet.of(ctx)
+    fleet = _Fleet.of(ctx, posed_for)
     rng = np.random.default_rng(seed)
     n_robots = ctx.problem.n_robots
     involved = np.flatnonzero(np.diff(fleet.robot_conflicts[0]))  # robots in a conflict
@@ -686,6 +698,7 @@ def lns_search(
             # in no conflict need not be freed (nothing couples their times to others').
             whole = bool(np.isin(involved, neighbourhood.robots).all())
             proven = solved is not None and solved.optimal and whole and base is current
+            proven &= fleet.posed == ctx.objective  # a proof of the objective posed
             found = None if solved is None else neighbourhood.onto(current, solved)
             better = None if found is None else _cheaper(ctx, fleet, current, found, proven)
             sizes.record(better is not None)
