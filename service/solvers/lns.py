@@ -47,7 +47,7 @@ robots' part stays, and the sub-problem's own part is exact unless a picked robo
 waits further on for a held robot that a picked robot pushed (the evaluation that
 decides counts that). A search may pose its sub-problems for another objective than the
 request's (``posed_for``: ``auto`` poses avg_delay's for avg_completion above its CP-SAT
-cap, see ``portfolio.LARGE_LNS_POSED_FOR``); the one evaluator still decides by the
+cap, see ``portfolio.LARGE_LNS_POSED``); the one evaluator still decides by the
 request's, and no such search claims a proof. Times are on CP-SAT's integer grid
 (:func:`~service.solvers.exact.integer_times`), the held times too (the least and
 latest times of the grid-rounded problem, so that the hint is feasible); every
@@ -698,7 +698,7 @@ def lns_search(
             # in no conflict need not be freed (nothing couples their times to others').
             whole = bool(np.isin(involved, neighbourhood.robots).all())
             proven = solved is not None and solved.optimal and whole and base is current
-            proven &= fleet.posed == ctx.objective  # a proof of the objective posed
+            proven &= fleet.posed == ctx.objective  # a proof holds for the objective posed
             found = None if solved is None else neighbourhood.onto(current, solved)
             better = None if found is None else _cheaper(ctx, fleet, current, found, proven)
             sizes.record(better is not None)
