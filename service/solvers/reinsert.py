@@ -293,7 +293,7 @@ class _Static(NamedTuple):
     @classmethod
     def of(cls, ctx: SolveContext) -> _Static:
         """The arrays of ``ctx``'s problem, built once per context (~13 ms at 22,000
-        conflicts, which searches taking turns with another would pay every turn)."""
+        conflicts, which the turns, a new search each, would pay every turn)."""
         cached = ctx.__dict__.get("_reinsert_static")
         if cached is None:
             cached = ctx.__dict__["_reinsert_static"] = cls._build(ctx)
@@ -878,8 +878,8 @@ def reinsert_search(
     or after ``config.whole_fleet_plateau`` steps without improvement that each
     re-inserted the whole fleet. Returns the cheapest answer seen.
 
-    ``cooling``: the (monotonic) span over which an annealed search cools, for searches
-    that take turns with another within it (default: from now to ``deadline``; with
+    ``cooling``: the (monotonic) span over which an annealed search cools, for the
+    searches of turns restarted within it (default: from now to ``deadline``; with
     ``max_steps``, by steps). ``config`` None: ReinsertConfig's defaults, read at the
     call (so that ``bench.ab`` can vary them)."""
     config = ReinsertConfig() if config is None else config
