@@ -46,8 +46,8 @@ only the picked robots' delays, left unpriced: measured even to worse, session 5
 robots' part stays, and the sub-problem's own part is exact unless a picked robot
 waits further on for a held robot that a picked robot pushed (the evaluation that
 decides counts that). A search may pose its sub-problems for another objective than the
-request's (``posed_for``: ``auto`` poses avg_delay's for avg_completion above its CP-SAT
-cap, see ``portfolio.LARGE_LNS_POSED``); the one evaluator still decides by the
+request's (``posed_for``: ``auto`` poses avg_delay's for avg_completion where LNS is its
+last stage, see ``portfolio.LAST_LNS_POSED``); the one evaluator still decides by the
 request's, and no such search claims a proof. Times are on CP-SAT's integer grid
 (:func:`~service.solvers.exact.integer_times`), the held times too (the least and
 latest times of the grid-rounded problem, so that the hint is feasible); every

@@ -29,10 +29,10 @@ comes first, improving in stages:
    From ``lns_min_conflicts`` conflicts until the deadline, instead of the next
    stage: on whole models of this size one CP-SAT worker barely moves from its
    hint; there only where MID_LNS_LEAST_S are left (with less, the turns take the
-   time; for avg_delay always). Above ``exact_stage_max_conflicts`` too, from smaller
-   neighbourhoods posed for avg_completion whatever the objective (LARGE_LNS_POSED),
-   where the budget leaves it time in proportion to the conflicts per robot (see
-   LARGE_LNS_RULE). Below ``lns_min_conflicts``, until it converges (a
+   time), posed for avg_completion whatever the objective (LAST_LNS_POSED). Above
+   ``exact_stage_max_conflicts`` too, from smaller neighbourhoods, where the budget
+   leaves it time in proportion to the conflicts per robot (see LARGE_LNS_RULE). Below
+   ``lns_min_conflicts``, posed for the request's objective, until it converges (a
    plateau at its largest neighbourhood), proves optimality (a step that freed every
    robot of a fleet of at most ``lns.MAX_ROBOTS``, proven by CP-SAT) or MID_LNS_SHARE
    of the time left has passed, then
@@ -132,11 +132,13 @@ EXACT_TIME_PER_BUILD = 4
 # kind, two seeds) 0.8770 / 0.8342 (turns / LNS; 11 / 1), and, once the held robots of
 # both searches were held by their completions (``Evaluator.held_weights``; LNS's not
 # kept), 0.9554 / 0.9598 (4 / 8): even. It kept session 26's rule until session 51, when
-# its sub-problems were posed for avg_completion (LARGE_LNS_POSED). (s per conflict per
+# its sub-problems were posed for avg_completion (LAST_LNS_POSED). (s per conflict per
 # robot, least s) left.
 LARGE_LNS_RULE = (0.015, 3.0)
-# What LNS's sub-problems minimise above the cap, for either objective (the lns module's
-# ``posed_for``): the picked robots' completions, every held robot held by its completion
+# What LNS's sub-problems minimise where LNS is the last stage (from ``lns_min_conflicts``
+# conflicts, above the cap too), for either objective (the lns module's ``posed_for``;
+# below, where CP-SAT follows, the request's objective, so that LNS may prove optimality):
+# the picked robots' completions, every held robot held by its completion
 # alone; an answer is still kept only where the one evaluator finds it cheaper in the
 # request's objective. Posed for avg_delay, every event of a held robot stayed held and
 # LNS did not pay there (above); ``auto`` posed for avg_completion costs no more in
@@ -146,12 +148,11 @@ LARGE_LNS_RULE = (0.015, 3.0)
 # robots, two worlds, two seeds, 5 s): the turns to the deadline (as shipped) against
 # them then LNS posed for avg_completion under avg_completion's rule 0.9378 / 0.9601 (5
 # cheaper, 11 dearer of 16); under that rule, posed for avg_delay against for
-# avg_completion (other worlds, ``--seed 500000``) 0.9565 / 0.9792 (4 / 12). At 100 robots
-# (where ``MID_LNS_LEAST_S`` keeps avg_delay's turns to the deadline) LNS posed so read even
-# with the turns at 5 s (0.9490 / 0.9518, 8 / 8): not changed there. At 10 s (where the old
-# rule ran LNS posed for avg_delay too; the 250-robot kinds above, one seed) posed for
-# avg_delay / for avg_completion 0.9596 / 0.9756 (2 / 6).
-LARGE_LNS_POSED: Objective = "avg_completion"
+# avg_completion (other worlds, ``--seed 500000``) 0.9565 / 0.9792 (4 / 12). At 10 s (where
+# the old rule ran LNS posed for avg_delay too; the 250-robot kinds above, one seed) posed
+# for avg_delay / for avg_completion 0.9596 / 0.9756 (2 / 6). At 100 robots from session 52
+# too: see MID_LNS_LEAST_S.
+LAST_LNS_POSED: Objective = "avg_completion"
 LARGE_LNS_ROBOTS = 4
 # LNS's sub-problems keep the held robots in the incumbent's topological order up to
 # ``exact_stage_max_conflicts`` conflicts (where its neighbourhoods start at LNS_ROBOTS):
@@ -225,9 +226,19 @@ REINSERT_SHARE = 0.43
 # on the two-way and two-lane ones, 2 / 10; 0.9548 / 0.9863 on those three kinds.) Again
 # in session 50, with both searches' held robots held by their completions
 # (``Evaluator.held_weights``), avg_delay at 5 s on wh_two_way, wh_two_lane, wh_one_way and
-# wh_mixed of 100 (two worlds, two seeds): 0.9731 / 0.9627 (10 / 6): still none.
+# wh_mixed of 100 (two worlds, two seeds): 0.9731 / 0.9627 (10 / 6): still none. Posed for
+# avg_completion (LAST_LNS_POSED; session 51 above the cap), LNS pays for avg_delay too
+# from 5 s (session 52, ``python -m bench.ab --objective avg_delay``, the turns to the
+# deadline against LNS posed for avg_completion after them; wh_two_way, wh_two_lane,
+# wh_one_way, wh_mixed, wh_parked of 100, 5 s): four worlds a kind, two seeds (``--seed
+# 700000``) 0.9453 / 0.9681 (13 cheaper, 27 dearer of 40; two-way 7 / 1, one-way and
+# parked 0 / 8); three worlds, two seeds (``--seed 800000``) 0.9393 / 0.9742 (6 / 24; two-way
+# 1 / 5); the bench's two-way and two-lane worlds (three, two seeds) even, 0.9317 / 0.9313
+# (5 / 7); 10 s, wh_two_way, wh_two_lane, wh_one_way, wh_parked, two worlds, one seed
+# (``--seed 900000``) 0.9664 / 0.9850 (2 / 6). At 3 s it read worse (session 51: 0.9493 /
+# 0.9428, 11 / 5), so from 4 s left.
 # Seconds left at least, by objective.
-MID_LNS_LEAST_S = {"avg_completion": 2.0, "avg_delay": math.inf}
+MID_LNS_LEAST_S = {"avg_completion": 2.0, "avg_delay": 4.0}
 # From MID_TURNS_MIN_CONFLICTS (and above ``exact_max_conflicts``) to below
 # ``lns_min_conflicts``, with less than MID_TURNS_BELOW_S of its objective left at the start
 # (avg_completion, avg_delay; not a re-schedule), the first stage is the plans then the
@@ -420,7 +431,7 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
         )
         robots = LARGE_LNS_ROBOTS if too_large else LNS_ROBOTS
         in_order = LNS_HELD_IN_ORDER and not too_large
-        posed = LARGE_LNS_POSED if too_large else None  # None: the request's objective
+        posed = LAST_LNS_POSED if lns_only or too_large else None  # None: the request's
         found = lns_search(
             ctx, best.assignment, until, ctx.seed,
             converge=not last, robots=robots, held_in_order=in_order, posed_for=posed,

@@ -167,6 +167,36 @@ def test_above_its_cap_auto_runs_lns_where_time_allows_for_the_density(
         assert not answer.solver.optimal
 
 
+@pytest.mark.parametrize("objective", ["avg_completion", "avg_delay"])
+@pytest.mark.parametrize(("lns_min", "posed"), [(0, "avg_completion"), (10**6, None)])
+def test_lns_is_posed_for_avg_completion_where_it_is_the_last_stage(
+    lns_min: int, posed: str | None, objective: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """From lns_min_conflicts (lowered to 0) LNS is the last stage and its sub-problems are
+    posed for avg_completion (LAST_LNS_POSED) for either objective; below it CP-SAT
+    follows and LNS is posed for the request's objective (None), so that it may prove.
+    The answer is valid either way."""
+    import service.solvers.portfolio as portfolio
+
+    calls: list[str | None] = []
+
+    def lns_search(*args: Any, **kwargs: Any) -> Any:
+        calls.append(kwargs["posed_for"])
+        return lns.lns_search(*args, **kwargs)
+
+    monkeypatch.setattr(portfolio, "lns_search", lns_search)
+    monkeypatch.setattr(portfolio, "MID_LNS_LEAST_S", {objective: 0.5})
+    line = json.loads((DATA / "wh_25.jsonl").read_text().splitlines()[0])
+    options = {"solver": "auto", "time_limit_s": 1.0}
+    body = {**line["request"], "objective": objective, "options": options}
+    policy = DispatchPolicy(exact_max_conflicts=0, lns_min_conflicts=lns_min)
+    answer = dispatch(ScheduleRequest.model_validate(body), policy)
+    assert calls == [posed]
+    if objective == line["request"]["objective"]:
+        assert answer.cost >= line["ref_cost"] * (1 - 1e-9)
+    assert answer.checks.acyclic and answer.checks.density
+
+
 def test_auto_uses_its_budget_when_tabu_stops_early_and_no_cp_sat_follows() -> None:
     """Tabu search stops on its own (patience) within a fraction of a second on a small
     problem; with no CP-SAT stage to follow, auto restarts it with new seeds from the best
@@ -189,7 +219,8 @@ def test_auto_uses_its_budget_when_tabu_stops_early_and_no_cp_sat_follows() -> N
         (10, "avg_completion", 0.0, False),
         (None, "avg_completion", 2.0, False),
         (None, "avg_completion", 0.5, True),
-        (None, "avg_delay", None, False),  # the shipped rule: no LNS for avg_delay
+        (None, "avg_delay", None, False),  # the shipped rule: LNS from 4 s for avg_delay
+        (None, "avg_delay", math.inf, False),
     ],
 )
 def test_from_lns_min_conflicts_re_insertion_follows_the_first_stage(
@@ -231,7 +262,14 @@ def test_from_lns_min_conflicts_re_insertion_follows_the_first_stage(
     else:
         assert untils[0] >= start + 0.95
         assert "re-insertion search to the deadline" in answer.solver.detail
-        below_cap = "LNS from 2 s" if objective == "avg_completion" else "no LNS for avg_delay"
+        shipped = {"avg_completion": "LNS from 2 s", "avg_delay": "LNS from 4 s"}[objective]
+        below_cap = (
+            shipped
+            if least_s is None
+            else f"no LNS for {objective}"
+            if math.isinf(least_s)
+            else f"LNS from {least_s:g} s"
+        )
         assert (below_cap if stage_cap is None else "above 10 conflicts") in answer.solver.detail
     if objective == line["request"]["objective"]:
         assert answer.cost >= line["ref_cost"] * (1 - 1e-9)
