@@ -359,10 +359,9 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
         )
     )
     lns_only = uses_lns and problem.n_conflicts >= ctx.lns_min_conflicts
+    no_cp_sat = too_large or lns_only  # no CP-SAT stage at this size: LNS, if any, is last
     # The least time worth a CP-SAT stage (inf: none at this size).
-    exact_min_s = (
-        np.inf if too_large or lns_only else build_seconds(problem, ctx.cliques, ctx.objective)
-    )
+    exact_min_s = np.inf if no_cp_sat else build_seconds(problem, ctx.cliques, ctx.objective)
     exact_min_s *= EXACT_TIME_PER_BUILD
     reinserts = (  # LNS_OBJECTIVES hold REINSERT_OBJECTIVES: uses_lns or too_large then
         ctx.objective in REINSERT_OBJECTIVES
@@ -431,7 +430,7 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
         )
         robots = LARGE_LNS_ROBOTS if too_large else LNS_ROBOTS
         in_order = LNS_HELD_IN_ORDER and not too_large
-        posed = LAST_LNS_POSED if lns_only or too_large else None  # None: the request's
+        posed = LAST_LNS_POSED if no_cp_sat else None  # None: the request's objective
         found = lns_search(
             ctx, best.assignment, until, ctx.seed,
             converge=not last, robots=robots, held_in_order=in_order, posed_for=posed,
