@@ -819,12 +819,17 @@ def improve(
     ).costs[ctx.objective]  # (1 + F,) the hint, then each answer found
     hinted, mine = float(costs[0]), costs[1:]
     k, proven = int(np.argmin(mine)), cpsat_proven  # ties: CP-SAT's, found first
-    if milp is not None and _milp_proof_holds(milp, float(mine[-1]), float(mine.min())):
+    if milp is not None and _milp_proof_holds(milp, float(mine[-1]), float(costs.min())):
         k, proven = len(found) - 1, True
     answer, by = found[k]
     cost = float(mine[k])
-    if cost > hinted:  # even proven: CP-SAT's integer time scaling may lose the hint's optimum
-        return replace(start, optimal=False), f"{by} did not improve"
+    if cost > hinted:
+        # CP-SAT proves its integer-scaled times' optimum, which may lose the hint's; the
+        # MILP's proof (exact times) holds for a hint no dearer than its answer (within
+        # MILP_COST_TOL, else the proof was not taken): equal costs to the last bits.
+        kept = proven and by == MILP_NAME
+        verdict = f"proven optimal by {by}" if kept else f"{by} did not improve"
+        return replace(start, optimal=kept), verdict
     if proven:
         verdict = f"proven optimal by {by}"
     else:

@@ -111,6 +111,44 @@ def test_a_cheaper_cpsat_answer_voids_the_milp_proof(monkeypatch: pytest.MonkeyP
     assert ctx.cost(found.assignment) == pytest.approx(best.costs["avg_delay"], rel=REL)
 
 
+def test_a_hint_as_cheap_as_the_milp_proof_is_proven(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The MILP proves an answer whose cost the evaluator reads a bit above the hint's
+    (another summation order; within the proof's tolerance): the hint is kept, proven."""
+    _no_cpsat(monkeypatch)
+    seed = next(s for s in range(50) if len({c.costs["avg_delay"] for c in _brute(s)}) > 1)
+    ctx = _context(seed)
+    worst, best = _worst_and_best(seed)
+    _fake_milp(monkeypatch, _single(worst), best.costs["avg_delay"])
+    evaluate = ctx.evaluator.evaluate
+
+    def worst_as_best(assignments: Assignments):  # noqa: ANN202
+        """The worst answer read one part in 1e9 above the best's cost."""
+        found = evaluate(assignments)
+        worst_rows = (assignments.a_first == worst.a_first).all(axis=1) & (
+            assignments.following == worst.following
+        ).all(axis=1)
+        found.costs["avg_delay"][worst_rows] = best.costs["avg_delay"] * (1 + 1e-9)
+        return found
+
+    monkeypatch.setattr(ctx.evaluator, "evaluate", worst_as_best)
+    found, verdict = improve(ctx, _start(ctx, best), TIME_LIMIT_S)
+    assert found.optimal and verdict == f"proven optimal by {MILP_NAME}"
+    assert ctx.cost(found.assignment) == pytest.approx(best.costs["avg_delay"], rel=REL)
+
+
+def test_a_hint_cheaper_than_the_milp_proof_voids_it(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The MILP 'proves' an answer dearer than the hint: HiGHS erred; the hint is kept,
+    unproven."""
+    _no_cpsat(monkeypatch)
+    seed = next(s for s in range(50) if len({c.costs["avg_delay"] for c in _brute(s)}) > 1)
+    ctx = _context(seed)
+    worst, best = _worst_and_best(seed)
+    _fake_milp(monkeypatch, _single(worst), worst.costs["avg_delay"])
+    found, verdict = improve(ctx, _start(ctx, best), TIME_LIMIT_S)
+    assert not found.optimal and verdict == f"{MILP_NAME} did not improve"
+    assert ctx.cost(found.assignment) == pytest.approx(best.costs["avg_delay"], rel=REL)
+
+
 def _cpsat_unproven(monkeypatch: pytest.MonkeyPatch, answer: Assignments) -> list[float]:
     """CP-SAT returning ``answer`` unproven; the time limits it was given."""
     limits: list[float] = []
