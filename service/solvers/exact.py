@@ -92,6 +92,7 @@ __all__ = [
     "improve",
     "integer_times",
     "literal_domains",
+    "milp_staged",
     "search",
     "solve",
     "time_slots",
@@ -782,12 +783,11 @@ def improve(
     where proven, and a verdict for the answer's detail. For MILP_STAGE_OBJECTIVES up to
     MILP_STAGE_MAX_CONFLICTS conflicts, CP-SAT gets 1 - MILP_STAGE_SHARE of the time (at
     least MILP_STAGE_CPSAT_LEAST_S) and, where it has not proven optimality, the MILP
-    backend the rest (see MILP_STAGE_SHARE and :func:`_milp_proof_holds`)."""
+    backend the rest, its delays bounded by the cheapest answer so far (see
+    MILP_STAGE_SHARE, :func:`~service.solvers.milp.solve_milp` and
+    :func:`_milp_proof_holds`)."""
     deadline = time.monotonic() + time_limit_s
-    staged = (
-        ctx.objective in MILP_STAGE_OBJECTIVES
-        and ctx.problem.n_conflicts <= MILP_STAGE_MAX_CONFLICTS
-    )
+    staged = milp_staged(ctx.problem, ctx.objective)
     cpsat_s = max((1 - MILP_STAGE_SHARE) * time_limit_s, MILP_STAGE_CPSAT_LEAST_S)
     milp_s = max(0.0, time_limit_s - cpsat_s) if staged else 0.0
     result = solve(
@@ -804,9 +804,11 @@ def improve(
     found = [] if result is None else [(result.assignment, "CP-SAT")]
     milp = None
     if milp_s > 0 and not cpsat_proven:
+        reached = min(ctx.cost(answer) for answer in (start.assignment, *(a for a, _ in found)))
         milp = solve_milp(
-            ctx.problem, ctx.cliques, ctx.evaluator, ctx.objective, deadline - time.monotonic()
-        )
+            ctx.problem, ctx.cliques, ctx.evaluator, ctx.objective,
+            deadline - time.monotonic(), cost_bound=reached,
+        )  # fmt: skip
         found += [] if milp is None else [(milp.assignment, MILP_NAME)]
     if not found:
         return replace(start, optimal=False), "CP-SAT found nothing"
@@ -838,6 +840,13 @@ def improve(
 
 
 MILP_NAME = "the MILP backend (HiGHS)"
+
+
+def milp_staged(problem: Problem, objective: Objective) -> bool:
+    """Whether :func:`improve` hands the MILP backend most of its time (see
+    MILP_STAGE_SHARE): an objective of MILP_STAGE_OBJECTIVES, up to
+    MILP_STAGE_MAX_CONFLICTS conflicts."""
+    return objective in MILP_STAGE_OBJECTIVES and problem.n_conflicts <= MILP_STAGE_MAX_CONFLICTS
 
 
 def _milp_proof_holds(milp: MilpResult, cost: float, least: float) -> bool:

@@ -642,14 +642,17 @@ def lns_search(
     robots: int = LNS_ROBOTS,
     held_in_order: bool = False,
     posed_for: Objective | None = None,
+    patience_s: float | None = None,
 ) -> LnsResult:
     """LNS from the valid ``start`` until ``deadline`` (monotonic), or with ``converge``
-    until a plateau at the largest neighbourhood (min(MAX_ROBOTS, fleet)); at once when a
-    step that freed every robot in a conflict (the whole problem: nothing held that
-    could wait) is proven optimal. The first neighbourhoods free ``robots`` robots;
-    with ``held_in_order`` they keep the held robots in the incumbent's order. Its
-    sub-problems are posed for ``posed_for`` (one of LNS_OBJECTIVES; None: the request's
-    objective), its answers kept by the request's; posed for another, it proves nothing.
+    until a plateau at the largest neighbourhood (min(MAX_ROBOTS, fleet)), or with
+    ``patience_s`` once it has gone as long without improving as it took to its last
+    improvement, and ``patience_s`` at least; at once when a step that freed every robot
+    in a conflict (the whole problem: nothing held that could wait) is proven optimal.
+    The first neighbourhoods free ``robots`` robots; with ``held_in_order`` they keep the
+    held robots in the incumbent's order. Its sub-problems are posed for ``posed_for``
+    (one of LNS_OBJECTIVES; None: the request's objective), its answers kept by the
+    request's; posed for another, it proves nothing.
 
     ``ctx.workers`` sub-problems are solved at once, each in a thread (CP-SAT releases
     the GIL): while one is solved the next is built, from robots that no running one
@@ -670,11 +673,14 @@ def lns_search(
     best, current = start, _Incumbent.start(ctx, fleet, start)
     sizes, steps = _Sizes(n_robots, converge, robots), 0
     pace = Pace(deadline, time.monotonic)  # steps: building a sub-problem
+    began_search = improved_at = pace.clock()
     # Each running sub-problem and the incumbent it was built on.
     running: dict[Future[_Solved | None], tuple[_Neighbourhood, _Incumbent]] = {}
     with ThreadPoolExecutor(max_workers=ctx.workers) as pool:
         while True:
-            while len(running) < ctx.workers and pace.fits(margin_s=MIN_STEP_S):
+            idle = pace.clock() - improved_at
+            patient = patience_s is None or idle < max(patience_s, improved_at - began_search)
+            while patient and len(running) < ctx.workers and pace.fits(margin_s=MIN_STEP_S):
                 busy = _in_flight(running.values(), n_robots)
                 count = None if busy.all() else sizes.next()
                 if count is None:
@@ -704,7 +710,7 @@ def lns_search(
             sizes.record(better is not None)
             if better is None:
                 continue
-            best, current = found, better
+            best, current, improved_at = found, better, pace.clock()
             if proven:
                 wait(running)  # at most ctx.workers - 1 others, each within the deadline
                 return LnsResult(best, current.cost, steps, True)

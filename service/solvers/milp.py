@@ -11,11 +11,12 @@ slot 2c+s makes side s of conflict c wait for the other side's pair exit, or its
 enter when the conflict is following-type, once the other side passes first), written
 with big-M terms on two binaries per conflict, ``a_first`` and ``following``:
 
-* delays: one continuous variable per event in [0, H] (H: the exact model's horizon, the
-  latest start plus every robot's duration), never decreasing along a path; times stay
-  in seconds, so there is no integer time scaling as in CP-SAT;
-* a slot's wait holds when its literals are true and is relaxed by M = H + its offset
-  otherwise (the following-level wait when the other side passes first, the
+* delays: one continuous variable per event in [0, U] (U: the exact model's horizon H,
+  the latest start plus every robot's duration, or less given a cost some answer reaches,
+  see :func:`_delay_upper`), never decreasing along a path; times stay in seconds, so
+  there is no integer time scaling as in CP-SAT;
+* a slot's wait holds when its literals are true and is relaxed by M = U(source) + its
+  offset otherwise (the following-level wait when the other side passes first, the
   exclusive-level wait when it also is exclusive-type);
 * acyclicity: a continuous position per node, increasing along paths and along every
   conflict arc (continuous suffices: a cycle of +1 steps is infeasible either way);
@@ -115,8 +116,15 @@ def solve_milp(
     evaluator: Evaluator,
     objective: Objective,
     time_limit_s: float,
+    cost_bound: float | None = None,
 ) -> MilpResult | None:
     """Best assignment HiGHS finds within the time limit (None if it found none).
+
+    ``cost_bound``: a cost some answer reaches (an incumbent's, by the evaluator). For the
+    sums it bounds every delay (:func:`_delay_upper`), and with it every big-M term: the
+    optimum stays within. HiGHS proved the largest components of wh_100/1 and /2 posed for
+    avg_delay (246 and 199 conflicts) in 3.1-4.0 and 2.5 s bounded by ``auto``'s answers,
+    in 4.4 and 3.4-3.5 s without (session 53).
 
     Raises:
         ValueError: an objective outside :data:`MILP_OBJECTIVES`.
@@ -125,7 +133,9 @@ def solve_milp(
         raise ValueError(f"the MILP models {sorted(MILP_OBJECTIVES)}, not {objective}")
     start = time.perf_counter()
     m = problem.n_conflicts
-    cost, constant, integrality, bounds, rows = _model(problem, cliques, evaluator, objective)
+    cost, constant, integrality, bounds, rows = _model(
+        problem, cliques, evaluator, objective, cost_bound
+    )
     built = time.perf_counter()
     res = milp(
         cost,
@@ -153,16 +163,29 @@ def solve_milp(
 
 
 def _model(
-    problem: Problem, cliques: Cliques, evaluator: Evaluator, objective: Objective
+    problem: Problem,
+    cliques: Cliques,
+    evaluator: Evaluator,
+    objective: Objective,
+    cost_bound: float | None = None,
 ) -> tuple[np.ndarray, float, np.ndarray, Bounds, LinearConstraint]:
     """Objective vector and its constant term, integrality, bounds and rows over the
     variables [a_first (M), following (M), delay (E), position (V)] and, for
-    max_completion only, the maximum completion (1)."""
+    max_completion only, the maximum completion (1); delays bounded as
+    :func:`_delay_upper` by ``cost_bound`` (None: by the horizon alone)."""
     graph = evaluator.graph
     m, n_events, n_nodes = problem.n_conflicts, graph.chain_next.size, problem.n_nodes
     t = problem.tp_time
     first_tp, last_tp = problem.tp_start[:-1], problem.last_tp
     horizon = float(t[first_tp].max() + (t[last_tp] - t[first_tp]).sum())
+    finish = t[last_tp]  # (R,) planned completion
+    constant = float(finish.mean()) if objective == "avg_completion" else 0.0
+    upper_delay = np.full(n_events, horizon)  # (E,)
+    if cost_bound is not None and objective != "max_completion":
+        weight = evaluator.objective_weights(objective)[:-1]  # (E,)
+        if objective == "avg_completion":  # the mean of completions
+            weight = weight / problem.n_robots
+        upper_delay = _delay_upper(problem, weight, cost_bound - constant, horizon)
     x_col, f_col = np.arange(m), m + np.arange(m)
     d_base, p_base, top = 2 * m, 2 * m + n_events, 2 * m + n_events + n_nodes
     n_vars = top + (objective == "max_completion")
@@ -173,7 +196,7 @@ def _model(
     rows = _Rows()
     chain = np.flatnonzero(graph.chain_next >= 0)  # (K,) delays never decrease on a path
     rows.add([(delay_col(graph.chain_next[chain]), 1.0), (delay_col(chain), -1.0)], 0.0, np.inf)
-    _add_waits(rows, graph, horizon, x_col, f_col, delay_col)
+    _add_waits(rows, graph, upper_delay, x_col, f_col, delay_col)
     _add_acyclicity(rows, problem, x_col, p_base)
     binding = np.flatnonzero(cliques.binding())  # (Q',) at most h_K following-type in each
     sizes = cliques.start[binding + 1] - cliques.start[binding]  # (Q',)
@@ -183,7 +206,7 @@ def _model(
     rows.add_sums(group, f_col[cliques.edge[member]], cliques.budget[binding])
 
     lower = np.zeros(n_vars)
-    upper = np.concatenate([np.ones(2 * m), np.full(n_events, horizon), np.full(n_nodes, n_nodes)])
+    upper = np.concatenate([np.ones(2 * m), upper_delay, np.full(n_nodes, n_nodes)])
     upper = np.append(upper, [np.inf] * (n_vars - top))  # the maximum completion, if any
     forced = problem.forced_arcs[0]
     lower[x_col[forced]] = upper[x_col[forced]] = (problem.forced[forced] > 0).astype(float)
@@ -191,12 +214,10 @@ def _model(
     lower[f_col[fixed]] = upper[f_col[fixed]] = problem.fixed_type[fixed].astype(float)
     upper[f_col[cliques.forbidden()]] = 0.0
 
-    cost, constant = np.zeros(n_vars), 0.0
-    finish = t[last_tp]  # (R,) planned completion
+    cost = np.zeros(n_vars)
     last = delay_col(graph.last_event)  # (R,)
     if objective == "avg_completion":
         np.add.at(cost, last[last >= 0], 1.0 / problem.n_robots)
-        constant = float(finish.mean())
     elif objective == "max_completion":
         cost[top] = 1.0
         rows.add([(np.full(finish.size, top), 1.0), (last, -1.0)], finish, np.inf)
@@ -207,9 +228,27 @@ def _model(
     return cost, constant, integrality, Bounds(lower, upper), rows.constraint(n_vars)
 
 
-def _add_waits(rows: _Rows, graph, horizon: float, x_col, f_col, delay_col) -> None:  # noqa: ANN001
+def _delay_upper(problem: Problem, weight: np.ndarray, budget: float, horizon: float) -> np.ndarray:
+    """(E,) the most each event's delay can be in an answer whose objective, a sum of event
+    delays weighted by ``weight`` (E,) >= 0, is at most ``budget`` (a cost some answer
+    reaches, less the objective's constant), and at most ``horizon``: delays never fall
+    along a path, so an event's delay times the weights of it and of its robot's later
+    events is at most the budget. The optimum keeps within; the budget is widened by a
+    relative 1e-6 so that the answer that reaches it does too."""
+    robot = problem.tp_robot[problem.events]  # (E,) sorted: a robot's events are contiguous
+    total = np.cumsum(weight)  # (E,)
+    last = np.searchsorted(robot, robot, side="right") - 1  # (E,) its robot's last event
+    later = total[last] - total + weight  # (E,) weights of the event and the robot's later ones
+    room = max(budget, 0.0) * (1 + 1e-6) + 1e-9
+    with np.errstate(divide="ignore"):
+        return np.minimum(np.where(later > 0, room / later, horizon), horizon)
+
+
+def _add_waits(rows: _Rows, graph, upper_delay: np.ndarray, x_col, f_col, delay_col) -> None:  # noqa: ANN001
     """Both waits of every live slot: d[target] >= d[source] + offset when active,
-    relaxed by M = horizon + max(offset, 0) per inactive literal."""
+    relaxed by M = the source's most delay (``upper_delay`` (E,); the zero slot's 0) +
+    max(offset, 0) per inactive literal."""
+    upper = np.append(upper_delay, 0.0)  # (E+1,)
     j = np.flatnonzero(graph.live)  # (K,) slots
     conflict, side = j // 2, j % 2
     target = delay_col(graph.target[j])
@@ -217,7 +256,7 @@ def _add_waits(rows: _Rows, graph, horizon: float, x_col, f_col, delay_col) -> N
     sign = np.where(side == 1, -1.0, 1.0)  # coefficient of a_first in "relax * M"
     for kind in (1, 0):  # following-level (pair enter), exclusive-level (pair exit)
         offset = graph.offset[kind, j]
-        big = horizon + np.maximum(offset, 0.0)
+        big = upper[graph.source[kind, j]] + np.maximum(offset, 0.0)
         # d_t - d_s >= offset - big * relax with relax = 1 - x (side 1) or x (side 0), plus
         # f at the exclusive level; moved to the left side:
         # d_t - d_s + sign * big * x (+ big * f) >= offset - big * [side == 1]

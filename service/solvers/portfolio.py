@@ -74,8 +74,9 @@ from service.core.cliques import Cliques
 from service.core.decompose import DECOMPOSABLE, Part, join, parts
 from service.core.retype import descend_types
 from service.core.schemas import Objective
-from service.solvers.exact import build_seconds, improve
+from service.solvers.exact import build_seconds, improve, milp_staged
 from service.solvers.lns import LNS_OBJECTIVES, LNS_ROBOTS, lns_search
+from service.solvers.lns import MAX_ROBOTS as LNS_MAX_ROBOTS
 from service.solvers.registry import SolveContext, SolverOutput, get_solver, register
 from service.solvers.reinsert import REINSERT_OBJECTIVES, planned_start
 from service.solvers.tabu import plain_start, tabu_search
@@ -186,6 +187,25 @@ LNS_HELD_IN_ORDER = True  # up to exact_stage_max_conflicts; above, never (measu
 # 5 s 26 of the 28 MILP-proven runs proven as before. At 1 s the CP-SAT stage, with half
 # of what priority search left, rarely improved LNS's answer. 0.95 read as 0.8.
 MID_LNS_SHARE = 0.8
+# Where the CP-SAT stage hands most of its time to the MILP backend (``exact.milp_staged``)
+# and the fleet has more robots than LNS frees at most (``lns.MAX_ROBOTS``: no step is a
+# whole-problem solve, which may prove or find a far cheaper answer late), LNS before it
+# also ends once it has gone as long without improving as it took to its last improvement,
+# and this many seconds at least (``lns_search``'s ``patience_s``): there the MILP proves,
+# from scratch, and needs the time. On wh_100/1 and /2 posed for avg_delay LNS reached its
+# final answer within a tenth of its 3.6-4 s (the MILP, bounded, then needs 3.1-3.5 s of the
+# largest component's ~4.7). Measured (session 53, ``python -m bench.ab --objective
+# avg_delay``, 5 s, two seeds; A as before, B this and the MILP bounded by the incumbent):
+# the sets wh_25, wh_50, wh_100, geo_dense_25 and wh_two_way, wh_two_lane, floor_dense 25
+# (two worlds, ``--seed 3000``) proven 53 -> 56 of 62 (wh_100 2 -> 6; geo_dense_25/7 lost in
+# one run, which A proved at 4.79 s), costs equal; wh_two_way, wh_two_lane, floor_dense,
+# wh_one_way, wh_mixed 25 (three worlds, ``--seed 4000``) 0.9911 / 0.9926 (B cheaper in 1 of
+# 30, dearer in none), proven 15 / 15; 1 s as before. Tried first: LNS's share before the
+# stage 0.2 (for 0.8): the sets proven 53 -> 55 and 53 -> 57, but dearer in 5 of 30 runs on
+# those 25-robot worlds (a proof lost) and at 1 s proven 29 -> 21 of 62; patient at every
+# fleet size: dearer in 3 of 30 there, and on wh_two_lane/25/3000 5.46 against 5.04 (LNS's
+# late whole-fleet steps found the cheaper answer).
+MILP_LNS_PATIENCE_S = 0.5
 # From ``lns_min_conflicts`` conflicts, re-insertion search (:mod:`service.solvers.reinsert`)
 # follows the first stage: with REINSERT_SHARE of the time left when LNS follows it, else
 # to the deadline (above ``exact_stage_max_conflicts`` where LNS does not pay, instead of
@@ -428,12 +448,16 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
         until = (
             deadline if last else min(deadline - left * (1 - MID_LNS_SHARE), deadline - exact_min_s)
         )
+        # The MILP follows, and no LNS step frees the whole fleet (which may prove).
+        staged = milp_staged(problem, ctx.objective) and not last
+        staged &= problem.n_robots > LNS_MAX_ROBOTS
         robots = LARGE_LNS_ROBOTS if too_large else LNS_ROBOTS
         in_order = LNS_HELD_IN_ORDER and not too_large
         posed = LAST_LNS_POSED if no_cp_sat else None  # None: the request's objective
         found = lns_search(
             ctx, best.assignment, until, ctx.seed,
             converge=not last, robots=robots, held_in_order=in_order, posed_for=posed,
+            patience_s=MILP_LNS_PATIENCE_S if staged else None,
         )  # fmt: skip
         steps = found.steps
         if found.cost < cost or found.optimal:

@@ -386,6 +386,31 @@ def test_lns_ends_at_its_deadline_with_a_valid_answer() -> None:
     assert cost <= float(ctx.evaluator.evaluate(start).costs["avg_completion"][0])
 
 
+def test_with_patience_it_ends_once_as_long_without_improving_as_to_its_last(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """``patience_s``: no step ever improving, the search ends after ``patience_s``; every
+    step improving for its first 0.6 s, it ends 0.6 s after the last, not at its deadline
+    (3 s) either way."""
+    ctx = _context(_conformance("wh_50")["request"], "avg_completion")
+    start = plain_start(ctx)
+    cheaper = lns._cheaper
+    until = [0.0]
+
+    def improving_until(ctx: SolveContext, fleet, current, found, ties):  # noqa: ANN001, ANN202
+        """Every step's answer an improvement (kept as the same incumbent) until ``until``."""
+        return current if time.monotonic() < until[0] else cheaper(ctx, fleet, current, found, ties)
+
+    monkeypatch.setattr(lns, "_cheaper", improving_until)
+    for improving_s, least_s, most_s in ((0.0, 0.2, 0.7), (0.6, 1.0, 2.2)):
+        begin = time.monotonic()
+        until[0] = begin + improving_s
+        found = lns.lns_search(ctx, start, begin + 3.0, 0, patience_s=0.2)
+        elapsed = time.monotonic() - begin
+        assert least_s <= elapsed <= most_s, improving_s
+        assert found.steps >= 1
+
+
 def test_no_step_starts_whose_build_would_run_past_the_deadline(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:

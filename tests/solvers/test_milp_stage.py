@@ -12,13 +12,13 @@ import pytest
 
 from service.core.assignment import Assignments
 from service.core.decompose import parts
-from service.core.problem import problem_from_request
+from service.core.problem import Problem, problem_from_request
 from service.core.schemas import Objective, ScheduleRequest
-from service.solvers import exact
+from service.solvers import exact, portfolio
 from service.solvers.exact import MILP_NAME, ExactResult, improve
 from service.solvers.fcfs import fcfs
 from service.solvers.milp import MilpResult, solve_milp
-from service.solvers.registry import SolveContext, SolverOutput
+from service.solvers.registry import SolveContext, SolverOutput, get_solver
 from tests.reference import Candidate, feasible_assignments, reference_problem, tiny_request
 
 TIME_LIMIT_S = 30.0  # generous: tiny problems solve in milliseconds
@@ -75,7 +75,7 @@ def _fake_milp(
     was given."""
     limits: list[float] = []
 
-    def fake(problem, cliques, evaluator, objective_name, time_limit_s):  # noqa: ANN001, ANN202
+    def fake(problem, cliques, evaluator, objective_name, time_limit_s, cost_bound):  # noqa: ANN001, ANN202
         limits.append(time_limit_s)
         return MilpResult(answer, True, objective, objective, 0.0, 0.0)
 
@@ -222,3 +222,39 @@ def test_larger_problems_keep_cpsat_alone(monkeypatch: pytest.MonkeyPatch) -> No
     milp = _fake_milp(monkeypatch, fcfs(ctx).assignment, 0.0)
     found, _ = improve(ctx, fcfs(ctx), 2.0)
     assert not found.optimal and limits == [2.0] and milp == []
+
+
+def _largest_part(set_name: str, index: int) -> Problem:
+    """The largest component of a conformance problem."""
+    rec = json.loads((DATA / f"{set_name}.jsonl").read_text().splitlines()[index])
+    problem = problem_from_request(ScheduleRequest.model_validate(rec["request"]))
+    return max(parts(problem), key=lambda p: p.problem.n_conflicts).problem
+
+
+def test_lns_before_the_stage_is_patient_only_where_no_step_frees_the_fleet(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """``auto``: LNS before the MILP stage ends on MILP_LNS_PATIENCE_S where the fleet has
+    more robots than LNS frees at most (wh_100/0's largest component, 75 robots), not on
+    a fleet it may free whole (wh_25/4's, 25 robots), nor before CP-SAT alone
+    (avg_completion)."""
+    patience: list[tuple[int, str, float | None]] = []
+    search = portfolio.lns_search
+
+    def recorded(ctx: SolveContext, *args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+        patience.append((ctx.problem.n_robots, ctx.objective, kwargs.get("patience_s")))
+        return search(ctx, *args, **kwargs)
+
+    monkeypatch.setattr(portfolio, "lns_search", recorded)
+    for problem, objective in [
+        (_largest_part("wh_100", 0), "avg_delay"),
+        (_largest_part("wh_100", 0), "avg_completion"),
+        (_largest_part("wh_25", 4), "avg_delay"),
+    ]:
+        assert problem.n_conflicts <= exact.MILP_STAGE_MAX_CONFLICTS
+        get_solver("auto")(SolveContext(problem, objective, 1.0, exact_max_conflicts=20))
+    assert patience == [
+        (75, "avg_delay", portfolio.MILP_LNS_PATIENCE_S),
+        (75, "avg_completion", None),
+        (25, "avg_delay", None),
+    ]
