@@ -35,7 +35,8 @@ comes first, improving in stages:
    ``lns_min_conflicts``, posed for the request's objective, until it converges (a
    plateau at its largest neighbourhood), proves optimality (a step that freed every
    robot of a fleet of at most ``lns.MAX_ROBOTS``, proven by CP-SAT) or MID_LNS_SHARE
-   of the time left has passed, then
+   of the time left has passed (where the MILP backend follows, on larger fleets also
+   once it stalls: MILP_LNS_PATIENCE_S), then
 4. **exact**: CP-SAT hinted with the best answer so far, for the rest of the
    budget; it proves optimality where it can (``solver.optimal`` is true only
    then) and never returns worse than its hint (the cheaper is kept, by the one
@@ -449,15 +450,15 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
             deadline if last else min(deadline - left * (1 - MID_LNS_SHARE), deadline - exact_min_s)
         )
         # The MILP follows, and no LNS step frees the whole fleet (which may prove).
-        staged = milp_staged(problem, ctx.objective) and not last
-        staged &= problem.n_robots > LNS_MAX_ROBOTS
+        patient = milp_staged(problem, ctx.objective) and not last
+        patient &= problem.n_robots > LNS_MAX_ROBOTS
         robots = LARGE_LNS_ROBOTS if too_large else LNS_ROBOTS
         in_order = LNS_HELD_IN_ORDER and not too_large
         posed = LAST_LNS_POSED if no_cp_sat else None  # None: the request's objective
         found = lns_search(
             ctx, best.assignment, until, ctx.seed,
             converge=not last, robots=robots, held_in_order=in_order, posed_for=posed,
-            patience_s=MILP_LNS_PATIENCE_S if staged else None,
+            patience_s=MILP_LNS_PATIENCE_S if patient else None,
         )  # fmt: skip
         steps = found.steps
         if found.cost < cost or found.optimal:
