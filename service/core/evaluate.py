@@ -669,7 +669,7 @@ class Evaluator:
         weight = self.objective_weights(objective)
         if objective != "avg_delay":
             return weight
-        event_robot = self.problem.tp_robot[self.problem.events]  # (E,)
+        event_robot = self.problem.event_robot  # (E,)
         part = np.bincount(event_robot, weight[:-1], self.problem.n_robots)  # (R,)
         held = np.zeros_like(weight)
         held[self._last_event] = part

@@ -212,9 +212,14 @@ class Problem:
         return np.where(same_robot, last, events.size).astype(np.int64)
 
     @cached_property
+    def event_robot(self) -> np.ndarray:
+        """(E,) int: each event's robot, non-decreasing (a robot's events are contiguous)."""
+        return self.tp_robot[self.events]
+
+    @cached_property
     def event_next(self) -> np.ndarray:
         """(E,) int: the next event of the same robot, or -1."""
-        ev_robot = self.tp_robot[self.events]
+        ev_robot = self.event_robot
         same_next = np.zeros(ev_robot.size, dtype=bool)
         same_next[:-1] = ev_robot[1:] == ev_robot[:-1]
         return np.where(same_next, np.arange(1, ev_robot.size + 1), -1)

@@ -204,7 +204,7 @@ class _Fleet:
             (np.ones(n_conf), (conf_robots[:, 0], conf_robots[:, 1])), shape=(n_robots, n_robots)
         )
         scale, ti, horizon = integer_times(p)
-        event_robot = p.tp_robot[p.events]  # (E,) sorted: events go by robot
+        event_robot = p.event_robot  # (E,) sorted: events go by robot
         event_start = np.searchsorted(event_robot, np.arange(n_robots + 1))
         grid = Evaluator(replace(p, tp_time=ti / scale))
         domains = literal_domains(p, ctx.cliques.forbidden())

@@ -235,7 +235,7 @@ def _delay_upper(problem: Problem, weight: np.ndarray, budget: float, horizon: f
     along a path, so an event's delay times the weights of it and of its robot's later
     events is at most the budget. The optimum keeps within; the budget is widened by a
     relative 1e-6 so that the answer that reaches it does too."""
-    robot = problem.tp_robot[problem.events]  # (E,) sorted: a robot's events are contiguous
+    robot = problem.event_robot  # (E,) sorted: a robot's events are contiguous
     total = np.cumsum(weight)  # (E,)
     last = np.searchsorted(robot, robot, side="right") - 1  # (E,) its robot's last event
     later = total[last] - total + weight  # (E,) weights of the event and the robot's later ones

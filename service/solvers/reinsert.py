@@ -310,7 +310,7 @@ class _Static(NamedTuple):
         conf, side = order // 2, order % 2  # (2M,) each slot's conflict and side
         own, oth = 2 * conf + side, 2 * conf + 1 - side  # (2M,) evaluator slots
         forced = p.forced[conf].astype(np.int64)
-        event_robot = p.tp_robot[p.events]  # (E,)
+        event_robot = p.event_robot  # (E,)
         ev_node = np.zeros(p.events.size, dtype=np.int64)
         pair_event = graph.target.reshape(n_conf, 2)  # (M, 2) each side's pair-enter event
         ev_node[pair_event[:, 0]] = p.conf_a
