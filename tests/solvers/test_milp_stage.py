@@ -196,14 +196,18 @@ def test_other_objectives_keep_cpsat_alone(
     assert not found.optimal and limits == [2.0] and milp == []
 
 
+def _largest_part(set_name: str, index: int) -> Problem:
+    """The largest component of a conformance problem."""
+    rec = json.loads((DATA / f"{set_name}.jsonl").read_text().splitlines()[index])
+    problem = problem_from_request(ScheduleRequest.model_validate(rec["request"]))
+    return max(parts(problem), key=lambda p: p.problem.n_conflicts).problem
+
+
 def test_the_milp_stage_proves_what_cpsat_does_not() -> None:
     """The largest component of the conformance problem wh_100/0 posed for avg_delay (75
     robots, 189 conflicts): CP-SAT alone does not prove it in 4 s; the stage, its last
     MILP_STAGE_SHARE the MILP's, proves the optimum a long MILP run proves too."""
-    rec = json.loads((DATA / "wh_100.jsonl").read_text().splitlines()[0])
-    request = ScheduleRequest.model_validate(rec["request"])
-    part = max(parts(problem_from_request(request)), key=lambda p: p.problem.n_conflicts)
-    ctx = SolveContext(part.problem, "avg_delay", 4.0)
+    ctx = SolveContext(_largest_part("wh_100", 0), "avg_delay", 4.0)
     alone = exact.solve(ctx.problem, ctx.cliques, "avg_delay", 4.0, hint=fcfs(ctx).assignment)
     assert alone is not None and not alone.optimal
     found, verdict = improve(ctx, fcfs(ctx), 4.0)
@@ -222,13 +226,6 @@ def test_larger_problems_keep_cpsat_alone(monkeypatch: pytest.MonkeyPatch) -> No
     milp = _fake_milp(monkeypatch, fcfs(ctx).assignment, 0.0)
     found, _ = improve(ctx, fcfs(ctx), 2.0)
     assert not found.optimal and limits == [2.0] and milp == []
-
-
-def _largest_part(set_name: str, index: int) -> Problem:
-    """The largest component of a conformance problem."""
-    rec = json.loads((DATA / f"{set_name}.jsonl").read_text().splitlines()[index])
-    problem = problem_from_request(ScheduleRequest.model_validate(rec["request"]))
-    return max(parts(problem), key=lambda p: p.problem.n_conflicts).problem
 
 
 def test_lns_before_the_stage_is_patient_only_where_no_step_frees_the_fleet(
