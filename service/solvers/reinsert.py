@@ -140,6 +140,11 @@ ANNEAL = 0.04
 # of 16 or 32 for every fleet good on two-lane, bad on two-way ones. ``auto`` at 1 s
 # (four seeds, beside two controls): 0.8523 / 0.8537 -> PUSH 1 0.8684, 2 0.8889, 4 0.8761.
 PUSH = 2.0
+# Passages tried per robot with following-type allowed wherever it may be, less the
+# conflicts that overfilled a binding clique in the last (see _repair), before the
+# one whose room was taken conflict by conflict. Read at each call (so that ``bench.ab``
+# can vary it).
+ROOM_ROUNDS = 4
 # Random orders tried per step while annealing is hot (ReinsertConfig.hot_orders; once
 # cold, ReinsertConfig.orders). Measured (session 37; ``auto`` through the dispatcher on
 # the 12 generated warehouses of 100 and 250 robots, references r5, beside same-code
@@ -598,6 +603,7 @@ def _repair(
     weight: np.ndarray,  # (E+1,) float, each event delay's weight in the objective
     preferred: np.ndarray,  # (M,) bool, conflicts given room for following-type first
     price: float,  # a unit of delay past a placed robot's latest (inf: never), see _passage
+    rounds: int,  # ROOM_ROUNDS
     reach: np.ndarray,  # (V, V) bool, the fixed order's closure (see _fixed_reach), or (0, 0)
 ) -> tuple[float, int]:
     """Put the picked robots back in ``order``, each on its passage past the robots
@@ -623,6 +629,7 @@ def _repair(
     pass first, or that its bounds put after it, whose times it cannot meet."""
     placed = np.ones(st.rc_start.size - 1, dtype=np.bool_)
     placed[order] = False
+    need = np.zeros(room.size, dtype=np.int64)  # (Q,) scratch of _drop_overfilling
     cost = 0.0
     bound_node, bound_force = np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64)
     bound_pos = np.empty(0)  # no bounds (a search's repair): none found per robot
@@ -641,12 +648,6 @@ def _repair(
         for i in range(k):
             partner_pos[i] = pos[st.rc_partner_node[js[i]]]
         partner_pos[k:] = bound_pos
-        follow = np.zeros(k, dtype=np.bool_)
-        for first_pass in (True, False):  # room for the preferred conflicts first
-            for i in range(k):
-                c = st.rc_conf[js[i]]
-                if st.rc_may_follow[js[i]] and preferred[c] == first_pass:
-                    follow[i] = _take_room(st, c, room)
         kidx, ranks = _distinct_ranks(partner_pos)
         e0, e1 = st.ev_start[r], st.ev_start[r + 1]
         n_nodes = st.robot_start[r + 1] - st.robot_start[r]
@@ -654,17 +655,27 @@ def _repair(
         first = np.empty(k, dtype=np.bool_)
         chosen = np.empty(k, dtype=np.bool_)
         ev_node = st.ev_node[e0:e1]
-        pushed = -1.0
-        for deadlines in (True, False):  # without deadlines only for a plan's bounds
-            if pushed < 0 and (deadlines or reach.size > 0):
-                pushed = _passage(
-                    st, js, kidx, ranks.size, follow, e0, ev_node, n_nodes, d, latest, price,
-                    weight[e0:e1].sum(), gap, first, chosen, bound_node, bound_force, deadlines,
-                )  # fmt: skip
+        own = weight[e0:e1].sum()
+        follow = np.zeros(k, dtype=np.bool_)
+        for first_pass in (True, False):  # room for the preferred conflicts first
+            for i in range(k):
+                c = st.rc_conf[js[i]]
+                if st.rc_may_follow[js[i]] and preferred[c] == first_pass:
+                    follow[i] = _take_room(st, c, room)
+        pushed = _passage_of(
+            st, js, kidx, ranks.size, follow, e0, ev_node, n_nodes, d, latest, price, own,
+            gap, first, chosen, bound_node, bound_force, reach.size > 0,
+        )  # fmt: skip
         if pushed < 0:
             return np.inf, n_placed
-        cost += pushed
         _give_back(st, st.rc_conf[js[follow & ~chosen]], room)  # the room it did not need
+        if rounds > 0 and (st.rc_may_follow[js] & ~follow).any():  # room was short
+            pushed = _roomier(
+                st, js, kidx, ranks.size, e0, ev_node, n_nodes, d, latest, price, own, gap,
+                first, chosen, bound_node, bound_force, reach.size > 0, pushed, room, need,
+                rounds,
+            )  # fmt: skip
+        cost += pushed
         for i in range(k):
             c = st.rc_conf[js[i]]
             a_first[c] = first[i] == (st.rc_side[js[i]] == 0)
@@ -675,6 +686,41 @@ def _repair(
         for e in range(e0, e1):
             cost += weight[e] * d[e]
     return cost, -1
+
+
+@numba.njit(cache=True, nogil=True)
+def _passage_of(
+    st: _Static,
+    js: np.ndarray,
+    kidx: np.ndarray,
+    m: int,
+    follow: np.ndarray,
+    e0: int,
+    ev_node: np.ndarray,
+    n_nodes: int,
+    d: np.ndarray,
+    latest: np.ndarray,
+    price: float,
+    own: float,
+    gap: np.ndarray,
+    first: np.ndarray,
+    chosen: np.ndarray,
+    bound_node: np.ndarray,
+    bound_force: np.ndarray,
+    bounded: bool,
+) -> float:
+    """:func:`_passage` with deadlines, then (only where a plan's order bounds are set,
+    ``bounded``, and it found none) without: arguments and result as there."""
+    pushed = _passage(
+        st, js, kidx, m, follow, e0, ev_node, n_nodes, d, latest, price, own, gap, first,
+        chosen, bound_node, bound_force, True,
+    )  # fmt: skip
+    if pushed < 0 and bounded:
+        pushed = _passage(
+            st, js, kidx, m, follow, e0, ev_node, n_nodes, d, latest, price, own, gap, first,
+            chosen, bound_node, bound_force, False,
+        )  # fmt: skip
+    return pushed
 
 
 @numba.njit(cache=True, nogil=True)
@@ -919,8 +965,9 @@ def reinsert_search(
         )
         temperature = config.anneal * best_cost * (1.0 - cooled)
         orders = config.hot_orders if temperature > 0 else config.orders
+        rounds = 0 if temperature > 0 else ROOM_ROUNDS  # see ROOM_ROUNDS
         found = _best_repair(
-            st, current, picked, budget, weight, _price(config, current), rng, orders
+            st, current, picked, budget, weight, _price(config, current), rng, orders, rounds
         )
         steps += 1
         below = current.cost + _tolerated(temperature, rng)
@@ -1015,7 +1062,7 @@ def _plan(
     pos = np.arange(p.n_nodes, dtype=np.float64)  # (V,) increasing along every path
     cost, _ = _repair(
         _fixed_first(order.astype(np.int64), *fixed), st, delay, delay.copy(), pos, room,
-        a_first, following, weight, following.copy(), np.inf, reach,
+        a_first, following, weight, following.copy(), np.inf, 0, reach,
     )  # fmt: skip
     return Assignments.single(a_first, following) if np.isfinite(cost) else None
 
@@ -1054,6 +1101,7 @@ def _best_repair(
     price: float,
     rng: np.random.Generator,
     orders: int,
+    rounds: int,
 ) -> tuple[Assignments, np.ndarray] | None:
     """The picked robots put back in ``orders`` random orders, pushing held robots past
     their latest at ``price`` a unit: the repair whose picked robots' part of the
@@ -1062,7 +1110,7 @@ def _best_repair(
     shuffled = np.stack([rng.permutation(picked) for _ in range(orders)])  # (orders, k)
     cost, a_first, following, pos = _best_of_orders(
         st, shuffled, current.a_first, current.following, current.pos, current.delay,
-        current.latest, budget - current.counts, weight, price,
+        current.latest, budget - current.counts, weight, price, rounds,
     )  # fmt: skip
     return (Assignments.single(a_first, following), pos) if np.isfinite(cost) else None
 
@@ -1079,6 +1127,7 @@ def _best_of_orders(
     room: np.ndarray,  # (Q,) int, each binding clique's room left by the incumbent
     weight: np.ndarray,  # (E+1,) float
     price: float,
+    rounds: int,  # ROOM_ROUNDS
 ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
     """:func:`_repair` in each order (robots that must pass a picked one first moved ahead,
     :func:`_fixed_first`) -> the cheapest repair's picked part of the objective with the
@@ -1102,7 +1151,7 @@ def _best_of_orders(
             mine_pos = pos.copy()
             cost, failed = _repair(
                 order, st, delay.copy(), latest.copy(), mine_pos, room.copy(), mine_a_first,
-                mine_following, weight, following, price, np.zeros((0, 0), dtype=np.bool_),
+                mine_following, weight, following, price, rounds, np.zeros((0, 0), dtype=np.bool_),
             )  # fmt: skip
             if failed < 0:
                 break
@@ -1210,6 +1259,96 @@ def _take_room(st: _Static, conflict: int, room: np.ndarray) -> bool:
     for q in cliques:
         room[q] -= 1
     return True
+
+
+@numba.njit(cache=True, nogil=True)
+def _take_rooms(st: _Static, conflicts: np.ndarray, room: np.ndarray) -> bool:
+    """Whether room (Q,) holds every one of ``conflicts`` as following-type; if so, it is
+    taken, else ``room`` is left as it was."""
+    for n in range(conflicts.size):
+        if not _take_room(st, conflicts[n], room):
+            _give_back(st, conflicts[:n], room)
+            return False
+    return True
+
+
+@numba.njit(cache=True, nogil=True)
+def _roomier(
+    st: _Static,
+    js: np.ndarray,
+    kidx: np.ndarray,
+    m: int,
+    e0: int,
+    ev_node: np.ndarray,
+    n_nodes: int,
+    d: np.ndarray,
+    latest: np.ndarray,
+    price: float,
+    own: float,
+    gap: np.ndarray,
+    first: np.ndarray,
+    chosen: np.ndarray,
+    bound_node: np.ndarray,
+    bound_force: np.ndarray,
+    bounded: bool,
+    pushed: float,  # the passage found (gap, first, chosen, its delays in d) and its price
+    room: np.ndarray,  # (Q,) int, its following-type conflicts' room taken
+    need: np.ndarray,  # (Q,) int zeros, scratch
+    rounds: int,
+) -> float:
+    """The robot's passage where room was short for its following-type: as if every
+    binding clique had room (following-type wherever allowed at all), then again without
+    the conflicts that overfilled a clique (:func:`_drop_overfilling`), up to ``rounds``
+    passages; the first that fits replaces the passage found (arguments as
+    :func:`_passage_of`, outputs rewritten, its room taken) where it is better for the
+    robot -> the price of the passage kept."""
+    n = ev_node.size
+    was = (gap.copy(), first.copy(), chosen.copy(), d[e0 : e0 + n].copy())
+    score = d[e0 + n - 1] + pushed / max(own, 1e-300)
+    _give_back(st, st.rc_conf[js[chosen]], room)
+    follow = st.rc_may_follow[js].copy()
+    for _ in range(rounds):
+        found = _passage_of(
+            st, js, kidx, m, follow, e0, ev_node, n_nodes, d, latest, price, own, gap, first,
+            chosen, bound_node, bound_force, bounded,
+        )  # fmt: skip
+        if found < 0 or d[e0 + n - 1] + found / max(own, 1e-300) >= score - TOL:
+            break  # none better (dropping more only makes it dearer)
+        if chosen.sum() <= was[2].sum() and _take_rooms(st, st.rc_conf[js[chosen]], room):
+            return found
+        if not _drop_overfilling(st, js, chosen, follow, room, need):
+            break
+    gap[:], first[:], chosen[:], d[e0 : e0 + n] = was
+    _take_rooms(st, st.rc_conf[js[chosen]], room)  # it fitted before
+    return pushed
+
+
+@numba.njit(cache=True, nogil=True)
+def _drop_overfilling(
+    st: _Static,
+    js: np.ndarray,  # (K,) the robot's slots
+    chosen: np.ndarray,  # (K,) bool, following-type in the passage found
+    follow: np.ndarray,  # (K,) bool, following-type allowed; the dropped ones set False
+    room: np.ndarray,  # (Q,) int
+    need: np.ndarray,  # (Q,) int, zeros (scratch, left zeros)
+) -> bool:
+    """Following-type no longer allowed on the fewest chosen conflicts that overfill a
+    binding clique's ``room``, taken from the end of the robot's path (its later waits
+    delay fewer of its events) -> whether any was dropped."""
+    idx = np.flatnonzero(chosen)
+    for i in idx:
+        c = st.rc_conf[js[i]]
+        need[st.cq_clique[st.cq_start[c] : st.cq_start[c + 1]]] += 1
+    dropped = False
+    for i in idx[np.argsort(st.own_target[js[idx]])[::-1]]:
+        cliques = st.cq_clique[st.cq_start[st.rc_conf[js[i]]] : st.cq_start[st.rc_conf[js[i]] + 1]]
+        if (need[cliques] > room[cliques]).any():
+            follow[i], dropped = False, True
+            need[cliques] -= 1
+    for i in idx:
+        c = st.rc_conf[js[i]]
+        need[st.cq_clique[st.cq_start[c] : st.cq_start[c + 1]]] = 0
+    return dropped
 
 
 @numba.njit(cache=True, nogil=True)

@@ -65,8 +65,8 @@ CONTEXTS = st.builds(
 SLOW = [HealthCheck.too_slow]
 
 
-def _incumbent(ctx: SolveContext) -> reinsert._Incumbent:
-    start = plain_start(ctx)
+def _incumbent(ctx: SolveContext, start: Assignments | None = None) -> reinsert._Incumbent:
+    start = plain_start(ctx) if start is None else start
     rank = ctx.orientation.topological_rank(start.a_first[0])
     assert rank is not None
     held = ctx.evaluator.held_weights(ctx.objective)
@@ -114,7 +114,7 @@ def test_every_repair_is_valid_and_its_times_are_a_schedule_of_it(
     weight = ctx.evaluator.objective_weights(ctx.objective)
     cost, failed = reinsert._repair(
         order, static, delay, latest, pos, room, a_first, following, weight, current.following,
-        price, NO_REACH,
+        price, reinsert.ROOM_ROUNDS, NO_REACH,
     )  # fmt: skip
     if not np.isfinite(cost):  # only where fixed directions leave a robot no passage
         robot = order[failed]
@@ -126,7 +126,7 @@ def test_every_repair_is_valid_and_its_times_are_a_schedule_of_it(
         alone = reinsert._repair(
             order[failed : failed + 1], static, current.delay.copy(), current.latest.copy(),
             current.pos.copy(), room, current.a_first.copy(), current.following & ~mine, weight,
-            current.following, price, NO_REACH,
+            current.following, price, reinsert.ROOM_ROUNDS, NO_REACH,
         )  # fmt: skip
         assert alone[1] == -1
         return
@@ -208,22 +208,110 @@ def test_a_lone_robot_never_finishes_later_than_it_did(
     problem = ctx.problem
     if problem.n_conflicts == 0:
         return
-    static = reinsert._Static.of(ctx)
     current = _incumbent(ctx)
     weight = ctx.evaluator.objective_weights(ctx.objective)
     for robot in range(problem.n_robots):
-        order = np.array([robot])
-        freed = reinsert._freed(static, order, problem.n_conflicts)
-        room = ctx.cliques.budget.astype(np.int64) - current.counts
-        reinsert._give_back(static, np.flatnonzero(current.following & freed), room)
-        a_first, following = current.a_first.copy(), current.following & ~freed
-        cost, failed = reinsert._repair(
-            order, static, current.delay.copy(), current.latest.copy(), current.pos.copy(),
-            room, a_first, following, weight, current.following, price, NO_REACH,
-        )  # fmt: skip
-        assert failed == -1
-        had = float(weight[_events_of(ctx, order)] @ current.delay[_events_of(ctx, order)])
-        assert cost <= had + 1e-9
+        cost, _ = _alone(ctx, current, robot, price, reinsert.ROOM_ROUNDS)
+        mine = _events_of(ctx, np.array([robot]))
+        assert cost <= float(weight[mine] @ current.delay[mine]) + 1e-9
+
+
+@settings(max_examples=60, deadline=None, derandomize=True, suppress_health_check=SLOW)
+@given(
+    family=FAMILIES,
+    seed=st.integers(0, 10_000),
+    robots=st.integers(3, 30),
+    price=st.sampled_from([np.inf, 3.0]),
+    slack=st.sampled_from([None, 0, 1, 2]),
+)
+def test_a_passage_given_room_is_never_dearer_nor_roomier(
+    family: str, seed: int, robots: int, price: float, slack: int | None
+) -> None:
+    """Where room for following-type was short, the passage tried as if it were not (then
+    without the conflicts that overfilled a clique) replaces the one whose room was
+    taken conflict by conflict only where it is cheaper for its robot and takes no more
+    following-type conflicts: put back alone, a robot's part with ROOM_ROUNDS is at most
+    its part without, it has at most as many following-type conflicts, and the answer
+    keeps every density budget. ``slack`` (None: the problem's budgets): every budget cut
+    to what the incumbent uses plus that many, so that room is short."""
+    ctx = _context(_request(family, seed, robots), "avg_completion")
+    problem = ctx.problem
+    if problem.n_conflicts == 0:
+        return
+    start = plain_start(ctx)
+    if slack is not None:
+        cut = ctx.cliques.following_counts(start.following)[0] + slack
+        budget = np.minimum(ctx.cliques.budget, cut)
+        ctx = _context(_request(family, seed, robots), "avg_completion")
+        ctx.__dict__["cliques"] = replace(ctx.cliques, budget=budget)  # the cached property
+    current = _incumbent(ctx, start)
+    for robot in range(problem.n_robots):
+        mine = reinsert._freed(reinsert._Static.of(ctx), np.array([robot]), problem.n_conflicts)
+        plain, plain_answer = _alone(ctx, current, robot, price, 0)
+        cost, answer = _alone(ctx, current, robot, price, reinsert.ROOM_ROUNDS)
+        assert cost <= plain + 1e-9
+        assert answer.following[0][mine].sum() <= plain_answer.following[0][mine].sum()
+        assert check(problem, ctx.cliques, answer).density[0]
+
+
+@settings(max_examples=40, deadline=None, derandomize=True, suppress_health_check=SLOW)
+@given(family=FAMILIES, seed=st.integers(0, 10_000), robots=st.integers(3, 30))
+def test_a_roomier_passage_never_takes_more_following_type(
+    family: str, seed: int, robots: int
+) -> None:
+    """A robot's passage with no following-type conflict stays as it is, however much
+    room there is: any cheaper one found with room takes following-type conflicts
+    (more than none), and the room is left as it was."""
+    ctx = _context(_request(family, seed, robots), "avg_completion")
+    problem = ctx.problem
+    if problem.n_conflicts == 0:
+        return
+    st_, current = reinsert._Static.of(ctx), _incumbent(ctx)
+    room = np.full(ctx.cliques.budget.size, problem.n_conflicts, dtype=np.int64)
+    need = np.zeros(room.size, dtype=np.int64)
+    for robot in range(problem.n_robots):
+        js = np.arange(st_.rc_start[robot], st_.rc_start[robot + 1])
+        kidx, ranks = reinsert._distinct_ranks(current.pos[st_.rc_partner_node[js]])
+        e0, e1 = st_.ev_start[robot], st_.ev_start[robot + 1]
+        n_nodes = int(problem.robot_start[robot + 1] - problem.robot_start[robot])
+        gap = np.empty(n_nodes, dtype=np.int64)
+        first, chosen = np.empty(js.size, dtype=bool), np.empty(js.size, dtype=bool)
+        delay, ev_node = current.delay.copy(), st_.ev_node[e0:e1]
+        args = (st_, js, kidx, ranks.size)
+        rest = (e0, ev_node, n_nodes, delay, current.latest, np.inf, 1.0, gap, first, chosen)
+        pushed = reinsert._passage_of(
+            *args, np.zeros(js.size, dtype=bool), *rest, NO_BOUND, NO_BOUND, False
+        )
+        if pushed < 0:
+            continue  # fixed directions against held times
+        was = (gap.copy(), first.copy(), delay[e0:e1].copy())
+        kept = reinsert._roomier(
+            *args, *rest, NO_BOUND, NO_BOUND, False, pushed, room, need, reinsert.ROOM_ROUNDS
+        )
+        assert kept == pushed and not chosen.any()
+        assert np.array_equal(gap, was[0]) and np.array_equal(first, was[1])
+        assert np.array_equal(delay[e0:e1], was[2])
+        assert (room == problem.n_conflicts).all() and not need.any()
+
+
+def _alone(
+    ctx: SolveContext, current: reinsert._Incumbent, robot: int, price: float, rounds: int
+) -> tuple[float, Assignments]:
+    """``robot`` put back alone into ``current``, every other robot held -> its part of
+    the objective plus the price of its pushes, and the answer."""
+    static = reinsert._Static.of(ctx)
+    order = np.array([robot])
+    freed = reinsert._freed(static, order, ctx.problem.n_conflicts)
+    room = ctx.cliques.budget.astype(np.int64) - current.counts
+    reinsert._give_back(static, np.flatnonzero(current.following & freed), room)
+    a_first, following = current.a_first.copy(), current.following & ~freed
+    weight = ctx.evaluator.objective_weights(ctx.objective)
+    cost, failed = reinsert._repair(
+        order, static, current.delay.copy(), current.latest.copy(), current.pos.copy(), room,
+        a_first, following, weight, current.following, price, rounds, NO_REACH,
+    )  # fmt: skip
+    assert failed == -1
+    return cost, Assignments.single(a_first, following)
 
 
 @settings(max_examples=60, deadline=None, derandomize=True, suppress_health_check=SLOW)
@@ -360,25 +448,26 @@ def test_annealing_keeps_dearer_answers_and_returns_the_cheapest_seen(
 
 
 @pytest.mark.parametrize(("anneal", "tried"), [(0.2, "hot"), (0.0, "cold")])
-def test_a_step_tries_fewer_orders_while_hot(
+def test_a_step_tries_fewer_orders_and_passages_while_hot(
     anneal: float, tried: str, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """While annealing is hot (capped steps cool by step, so a search that anneals is hot
-    to its last step) a step tries ``hot_orders`` orders; cold (no annealing), ``orders``."""
+    to its last step) a step tries ``hot_orders`` orders and each robot one passage where
+    room is short; cold (no annealing), ``orders`` and up to ROOM_ROUNDS more."""
     line = (DATA / "wh_25.jsonl").read_text().splitlines()[0]
     ctx = _context(json.loads(line)["request"], "avg_completion")
-    orders: list[int] = []
+    tries: list[tuple[int, int]] = []  # each step's orders and rounds
     original = reinsert._best_repair
 
     def spy(*args: object) -> object:
-        orders.append(args[-1])
+        tries.append(args[-2:])
         return original(*args)
 
     monkeypatch.setattr(reinsert, "_best_repair", spy)
     config = reinsert.ReinsertConfig(robots=3, anneal=anneal, orders=3, hot_orders=1)
     found = reinsert.reinsert_search(ctx, plain_start(ctx), np.inf, 0, config, max_steps=20)
-    assert len(orders) == found.steps > 0
-    assert set(orders) == {1 if tried == "hot" else 3}
+    assert len(tries) == found.steps > 0
+    assert set(tries) == {(1, 0) if tried == "hot" else (3, reinsert.ROOM_ROUNDS)}
 
 
 def test_the_search_stops_at_its_deadline() -> None:
