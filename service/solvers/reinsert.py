@@ -30,6 +30,18 @@ only while every binding density clique of it has room left (held and placed con
 counted), and kept only where the exclusive constraint would not hold: the budgets
 always hold.
 
+**Room for following-type.** Which of r's conflicts get a clique's last room is decided
+before its passage, conflict by conflict (those following-type in the incumbent first),
+so where room is short the passage may be far from the best one the room allows: on a
+two-way warehouse of 250 robots, one robot put back alone finished at 285 s where
+CP-SAT (LNS) placed it at 57 s, following-type on four other conflicts of the same
+cliques. So in a cold step, where room was short for a robot, its passage is also sought
+as if every clique had room, then without the conflicts whose following-type overfilled
+a clique (the latest on its path first), up to ROOM_ROUNDS passages; the first that fits
+replaces the passage found where it is cheaper for the robot and takes no more
+following-type conflicts (taking more starved the robots put back after it: measured
+worse).
+
 A picked robot waits for a held partner's least time, and may pass first as long as
 the partner is then delayed no further than its *latest* delay
 (:meth:`~service.core.evaluate.Evaluator.latest_delays` of the incumbent): the latest
@@ -140,10 +152,21 @@ ANNEAL = 0.04
 # of 16 or 32 for every fleet good on two-lane, bad on two-way ones. ``auto`` at 1 s
 # (four seeds, beside two controls): 0.8523 / 0.8537 -> PUSH 1 0.8684, 2 0.8889, 4 0.8761.
 PUSH = 2.0
-# Passages tried per robot with following-type allowed wherever it may be, less the
-# conflicts that overfilled a binding clique in the last (see _repair), before the
-# one whose room was taken conflict by conflict. Read at each call (so that ``bench.ab``
-# can vary it).
+# Passages tried per robot, in a cold step where room for following-type was short, as if
+# it were not and then without the conflicts that overfilled a binding clique (see the
+# module, "Room for following-type"; 0: none). Read at each call (so that ``bench.ab`` can
+# vary it). Measured (session 54, ``python -m bench.ab``, ``auto``, 0 against 4; docs/
+# benchmarks.md "Room for following-type in a passage"): 1 s, wh_two_way and wh_two_lane
+# of 100 and 250 robots (three worlds, two seeds) 0.9332 -> 0.9478 (15 cheaper, 9 dearer
+# of 24), other worlds (``--seed 500000``, two) 0.9685 -> 0.9788 (11 / 5), wh_one_way,
+# wh_mixed, wh_parked of 100 and wh_one_way, wh_mixed of 250 (two) 0.9578 -> 0.9815
+# (15 / 5); avg_delay 1 s 0.8584 -> 0.8759 (16 / 4); 5 s 0.9744 -> 0.9838 (14 / 9); the
+# sets wh_25, wh_50, wh_100, geo_dense_25 at 5 s proven 26 / 26 as before. In hot steps
+# too: 0.9431 / 0.9346 (a step costs up to twice as much; hot, a step's count matters
+# more); in the plans too: even (0.9497 / 0.9486); 2 rounds against 4 even (12 / 12).
+# Without the rule "no more following-type conflicts", 400 cold steps from the cheapest
+# plan reached 155.0 on wh_two_lane/250/0 against 147.4 without rounds (148.0 with it),
+# and 163.0 on wh_two_way/100/0 against 184.0 (164.3 with it).
 ROOM_ROUNDS = 4
 # Random orders tried per step while annealing is hot (ReinsertConfig.hot_orders; once
 # cold, ReinsertConfig.orders). Measured (session 37; ``auto`` through the dispatcher on
