@@ -163,7 +163,8 @@ PUSH = 2.0
 # (15 / 5); avg_delay 1 s 0.8584 -> 0.8759 (16 / 4); 5 s 0.9744 -> 0.9838 (14 / 9); the
 # sets wh_25, wh_50, wh_100, geo_dense_25 at 5 s proven 26 / 26 as before. In hot steps
 # too: 0.9431 / 0.9346 (a step costs up to twice as much; hot, a step's count matters
-# more); in the plans too: even (0.9497 / 0.9486); 2 rounds against 4 even (12 / 12).
+# more); in the plans too: 0.9497 / 0.9486 (14 / 7 cheaper without); 2 rounds against 4
+# even (12 / 12).
 # Without the rule "no more following-type conflicts", 400 cold steps from the cheapest
 # plan reached 155.0 on wh_two_lane/250/0 against 147.4 without rounds (148.0 with it),
 # and 163.0 on wh_two_way/100/0 against 184.0 (164.3 with it).
@@ -640,7 +641,7 @@ def _repair(
     first then keeps the passage it had, which needed them; in turn by conflict alone,
     a robot that needed one of two conflicts sharing a clique's last room lost it on
     the generated warehouses, and with it every passage where it was fixed to pass
-    first).
+    first); with ``rounds`` (ROOM_ROUNDS) more, where room was short, see :func:`_roomier`.
 
     With ``reach`` (a plan where fixed directions between robots close cycles), each of
     the robot's nodes also stays before every placed node it must precede in the fixed
@@ -1323,8 +1324,8 @@ def _roomier(
     binding clique had room (following-type wherever allowed at all), then again without
     the conflicts that overfilled a clique (:func:`_drop_overfilling`), up to ``rounds``
     passages; the first that fits replaces the passage found (arguments as
-    :func:`_passage_of`, outputs rewritten, its room taken) where it is better for the
-    robot -> the price of the passage kept."""
+    :func:`_passage_of`, outputs rewritten, its room taken) where it is cheaper for the
+    robot and takes no more following-type conflicts -> the price of the passage kept."""
     n = ev_node.size
     was = (gap.copy(), first.copy(), chosen.copy(), d[e0 : e0 + n].copy())
     score = d[e0 + n - 1] + pushed / max(own, 1e-300)
@@ -1355,16 +1356,17 @@ def _drop_overfilling(
     room: np.ndarray,  # (Q,) int
     need: np.ndarray,  # (Q,) int, zeros (scratch, left zeros)
 ) -> bool:
-    """Following-type no longer allowed on the fewest chosen conflicts that overfill a
-    binding clique's ``room``, taken from the end of the robot's path (its later waits
-    delay fewer of its events) -> whether any was dropped."""
+    """Following-type no longer allowed on chosen conflicts that overfill a binding
+    clique's ``room``, taken from the end of the robot's path (its later waits delay fewer
+    of its events) until none overfills -> whether any was dropped."""
     idx = np.flatnonzero(chosen)
     for i in idx:
         c = st.rc_conf[js[i]]
         need[st.cq_clique[st.cq_start[c] : st.cq_start[c + 1]]] += 1
     dropped = False
     for i in idx[np.argsort(st.own_target[js[idx]])[::-1]]:
-        cliques = st.cq_clique[st.cq_start[st.rc_conf[js[i]]] : st.cq_start[st.rc_conf[js[i]] + 1]]
+        c = st.rc_conf[js[i]]
+        cliques = st.cq_clique[st.cq_start[c] : st.cq_start[c + 1]]
         if (need[cliques] > room[cliques]).any():
             follow[i], dropped = False, True
             need[cliques] -= 1
