@@ -40,7 +40,7 @@ as if every clique had room, then without the conflicts whose following-type ove
 a clique (the latest on its path first), up to ROOM_ROUNDS passages; the first that fits
 replaces the passage found where it is cheaper for the robot and takes no more
 following-type conflicts (taking more starved the robots put back after it: measured
-worse).
+worse), unless the robot is the last of its order (ROOM_LAST_MORE: none comes after it).
 
 A picked robot waits for a held partner's least time, and may pass first as long as
 the partner is then delayed no further than its *latest* delay
@@ -169,6 +169,15 @@ PUSH = 2.0
 # plan reached 155.0 on wh_two_lane/250/0 against 147.4 without rounds (148.0 with it),
 # and 163.0 on wh_two_way/100/0 against 184.0 (164.3 with it).
 ROOM_ROUNDS = 4
+# Whether the last robot of an order may take more following-type conflicts than the
+# passage it replaces (no robot put back after it can starve). Read at each call. Measured
+# (session 54, ``python -m bench.ab``, 1 s, wh_two_way and wh_two_lane of 100 and 250,
+# three worlds, two seeds): 0.9439 -> 0.9540 (16 cheaper, 8 dearer of 24; every family
+# better). A rule for every robot, taking more wherever every clique it fills keeps room
+# for all the may-be-following conflicts of the robots not yet put back (their count per
+# clique kept up to date through the repair; `/tmp/s54/reinsert_demand.py`): 0.9480 ->
+# 0.9555 (15 / 9), no better, with an (M,) count per repair; not kept.
+ROOM_LAST_MORE = True
 # Random orders tried per step while annealing is hot (ReinsertConfig.hot_orders; once
 # cold, ReinsertConfig.orders). Measured (session 37; ``auto`` through the dispatcher on
 # the 12 generated warehouses of 100 and 250 robots, references r5, beside same-code
@@ -628,6 +637,7 @@ def _repair(
     preferred: np.ndarray,  # (M,) bool, conflicts given room for following-type first
     price: float,  # a unit of delay past a placed robot's latest (inf: never), see _passage
     rounds: int,  # ROOM_ROUNDS
+    last_more: bool,  # ROOM_LAST_MORE
     reach: np.ndarray,  # (V, V) bool, the fixed order's closure (see _fixed_reach), or (0, 0)
 ) -> tuple[float, int]:
     """Put the picked robots back in ``order``, each on its passage past the robots
@@ -697,7 +707,7 @@ def _repair(
             pushed = _roomier(
                 st, js, kidx, ranks.size, e0, ev_node, n_nodes, d, latest, price, own, gap,
                 first, chosen, bound_node, bound_force, reach.size > 0, pushed, room, need,
-                rounds,
+                rounds, last_more and n_placed == order.size - 1,
             )  # fmt: skip
         cost += pushed
         for i in range(k):
@@ -1086,7 +1096,7 @@ def _plan(
     pos = np.arange(p.n_nodes, dtype=np.float64)  # (V,) increasing along every path
     cost, _ = _repair(
         _fixed_first(order.astype(np.int64), *fixed), st, delay, delay.copy(), pos, room,
-        a_first, following, weight, following.copy(), np.inf, 0, reach,
+        a_first, following, weight, following.copy(), np.inf, 0, False, reach,
     )  # fmt: skip
     return Assignments.single(a_first, following) if np.isfinite(cost) else None
 
@@ -1134,7 +1144,7 @@ def _best_repair(
     shuffled = np.stack([rng.permutation(picked) for _ in range(orders)])  # (orders, k)
     cost, a_first, following, pos = _best_of_orders(
         st, shuffled, current.a_first, current.following, current.pos, current.delay,
-        current.latest, budget - current.counts, weight, price, rounds,
+        current.latest, budget - current.counts, weight, price, rounds, ROOM_LAST_MORE,
     )  # fmt: skip
     return (Assignments.single(a_first, following), pos) if np.isfinite(cost) else None
 
@@ -1152,6 +1162,7 @@ def _best_of_orders(
     weight: np.ndarray,  # (E+1,) float
     price: float,
     rounds: int,  # ROOM_ROUNDS
+    last_more: bool,  # ROOM_LAST_MORE
 ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
     """:func:`_repair` in each order (robots that must pass a picked one first moved ahead,
     :func:`_fixed_first`) -> the cheapest repair's picked part of the objective with the
@@ -1175,7 +1186,8 @@ def _best_of_orders(
             mine_pos = pos.copy()
             cost, failed = _repair(
                 order, st, delay.copy(), latest.copy(), mine_pos, room.copy(), mine_a_first,
-                mine_following, weight, following, price, rounds, np.zeros((0, 0), dtype=np.bool_),
+                mine_following, weight, following, price, rounds, last_more,
+                np.zeros((0, 0), dtype=np.bool_),
             )  # fmt: skip
             if failed < 0:
                 break
@@ -1319,6 +1331,7 @@ def _roomier(
     room: np.ndarray,  # (Q,) int, its following-type conflicts' room taken
     need: np.ndarray,  # (Q,) int zeros, scratch
     rounds: int,
+    more: bool,  # it may take more following-type conflicts (the last robot of an order)
 ) -> float:
     """The robot's passage where room was short for its following-type: as if every
     binding clique had room (following-type wherever allowed at all), then again without
@@ -1338,7 +1351,9 @@ def _roomier(
         )  # fmt: skip
         if found < 0 or d[e0 + n - 1] + found / max(own, 1e-300) >= score - TOL:
             break  # none better (dropping more only makes it dearer)
-        if chosen.sum() <= was[2].sum() and _take_rooms(st, st.rc_conf[js[chosen]], room):
+        if (more or chosen.sum() <= was[2].sum()) and _take_rooms(
+            st, st.rc_conf[js[chosen]], room
+        ):
             return found
         if not _drop_overfilling(st, js, chosen, follow, room, need):
             break

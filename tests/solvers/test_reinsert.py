@@ -114,7 +114,7 @@ def test_every_repair_is_valid_and_its_times_are_a_schedule_of_it(
     weight = ctx.evaluator.objective_weights(ctx.objective)
     cost, failed = reinsert._repair(
         order, static, delay, latest, pos, room, a_first, following, weight, current.following,
-        price, reinsert.ROOM_ROUNDS, NO_REACH,
+        price, reinsert.ROOM_ROUNDS, True, NO_REACH,
     )  # fmt: skip
     if not np.isfinite(cost):  # only where fixed directions leave a robot no passage
         robot = order[failed]
@@ -126,7 +126,7 @@ def test_every_repair_is_valid_and_its_times_are_a_schedule_of_it(
         alone = reinsert._repair(
             order[failed : failed + 1], static, current.delay.copy(), current.latest.copy(),
             current.pos.copy(), room, current.a_first.copy(), current.following & ~mine, weight,
-            current.following, price, reinsert.ROOM_ROUNDS, NO_REACH,
+            current.following, price, reinsert.ROOM_ROUNDS, True, NO_REACH,
         )  # fmt: skip
         assert alone[1] == -1
         return
@@ -211,7 +211,7 @@ def test_a_lone_robot_never_finishes_later_than_it_did(
     current = _incumbent(ctx)
     weight = ctx.evaluator.objective_weights(ctx.objective)
     for robot in range(problem.n_robots):
-        cost, _ = _alone(ctx, current, robot, price, reinsert.ROOM_ROUNDS)
+        cost, _ = _alone(ctx, current, robot, price, reinsert.ROOM_ROUNDS, True)
         mine = _events_of(ctx, np.array([robot]))
         assert cost <= float(weight[mine] @ current.delay[mine]) + 1e-9
 
@@ -229,11 +229,12 @@ def test_a_passage_given_room_is_never_dearer_nor_roomier(
 ) -> None:
     """Where room for following-type was short, the passage tried as if it were not (then
     without the conflicts that overfilled a clique) replaces the one whose room was
-    taken conflict by conflict only where it is cheaper for its robot and takes no more
-    following-type conflicts: put back alone, a robot's part with ROOM_ROUNDS is at most
-    its part without, it has at most as many following-type conflicts, and the answer
-    keeps every density budget. ``slack`` (None: the problem's budgets): every budget cut
-    to what the incumbent uses plus that many, so that room is short."""
+    taken conflict by conflict only where it is cheaper for its robot and (but for the
+    last robot of an order) takes no more following-type conflicts: put back alone, a
+    robot's part with ROOM_ROUNDS is at most its part without, as the last robot or not;
+    not as the last, it has at most as many following-type conflicts; the answer keeps
+    every density budget. ``slack`` (None: the problem's budgets): every budget cut to
+    what the incumbent uses plus that many, so that room is short."""
     ctx = _context(_request(family, seed, robots), "avg_completion")
     problem = ctx.problem
     if problem.n_conflicts == 0:
@@ -247,11 +248,13 @@ def test_a_passage_given_room_is_never_dearer_nor_roomier(
     current = _incumbent(ctx, start)
     for robot in range(problem.n_robots):
         mine = reinsert._freed(reinsert._Static.of(ctx), np.array([robot]), problem.n_conflicts)
-        plain, plain_answer = _alone(ctx, current, robot, price, 0)
-        cost, answer = _alone(ctx, current, robot, price, reinsert.ROOM_ROUNDS)
-        assert cost <= plain + 1e-9
-        assert answer.following[0][mine].sum() <= plain_answer.following[0][mine].sum()
-        assert check(problem, ctx.cliques, answer).density[0]
+        plain, plain_answer = _alone(ctx, current, robot, price, 0, False)
+        for last in (False, True):
+            cost, answer = _alone(ctx, current, robot, price, reinsert.ROOM_ROUNDS, last)
+            assert cost <= plain + 1e-9
+            more = answer.following[0][mine].sum() > plain_answer.following[0][mine].sum()
+            assert last or not more
+            assert check(problem, ctx.cliques, answer).density[0]
 
 
 @settings(max_examples=40, deadline=None, derandomize=True, suppress_health_check=SLOW)
@@ -260,8 +263,11 @@ def test_a_roomier_passage_never_takes_more_following_type(
     family: str, seed: int, robots: int
 ) -> None:
     """A robot's passage with no following-type conflict stays as it is, however much
-    room there is: any cheaper one found with room takes following-type conflicts
-    (more than none), and the room is left as it was."""
+    room there is, unless it is the last of its order: any cheaper one found with room
+    takes following-type conflicts (more than none), and the room is left as it was.
+    As the last, the passage kept is the cheaper of it and the one as if every clique had
+    room (which this room holds), and the room holds its following-type conflicts
+    exactly."""
     ctx = _context(_request(family, seed, robots), "avg_completion")
     problem = ctx.problem
     if problem.n_conflicts == 0:
@@ -271,8 +277,10 @@ def test_a_roomier_passage_never_takes_more_following_type(
     need = np.zeros(room.size, dtype=np.int64)
     for robot in range(problem.n_robots):
         js = np.arange(st_.rc_start[robot], st_.rc_start[robot + 1])
-        kidx, ranks = reinsert._distinct_ranks(current.pos[st_.rc_partner_node[js]])
         e0, e1 = st_.ev_start[robot], st_.ev_start[robot + 1]
+        if js.size == 0:
+            continue  # in no conflict
+        kidx, ranks = reinsert._distinct_ranks(current.pos[st_.rc_partner_node[js]])
         n_nodes = int(problem.robot_start[robot + 1] - problem.robot_start[robot])
         gap = np.empty(n_nodes, dtype=np.int64)
         first, chosen = np.empty(js.size, dtype=bool), np.empty(js.size, dtype=bool)
@@ -286,19 +294,43 @@ def test_a_roomier_passage_never_takes_more_following_type(
             continue  # fixed directions against held times
         was = (gap.copy(), first.copy(), delay[e0:e1].copy())
         kept = reinsert._roomier(
-            *args, *rest, NO_BOUND, NO_BOUND, False, pushed, room, need, reinsert.ROOM_ROUNDS
-        )
+            *args, *rest, NO_BOUND, NO_BOUND, False, pushed, room, need, reinsert.ROOM_ROUNDS,
+            False,
+        )  # fmt: skip
         assert kept == pushed and not chosen.any()
         assert np.array_equal(gap, was[0]) and np.array_equal(first, was[1])
         assert np.array_equal(delay[e0:e1], was[2])
         assert (room == problem.n_conflicts).all() and not need.any()
+        kept = reinsert._roomier(
+            *args, *rest, NO_BOUND, NO_BOUND, False, pushed, room, need, reinsert.ROOM_ROUNDS,
+            True,
+        )  # fmt: skip
+        roomy = current.delay.copy()  # as if there were room for every conflict:
+        price = reinsert._passage_of(
+            *args, st_.rc_may_follow[js].copy(), e0, ev_node, n_nodes, roomy, current.latest,
+            np.inf, 1.0, gap.copy(), first.copy(), chosen.copy(), NO_BOUND, NO_BOUND, False,
+        )  # fmt: skip
+        least = min(was[2][-1] + pushed, roomy[e1 - 1] + price)
+        assert delay[e1 - 1] + kept == pytest.approx(least)
+        taken = np.zeros_like(room)  # (Q,) the chosen conflicts' binding cliques, counted
+        for c in st_.rc_conf[js[chosen]]:
+            taken[st_.cq_clique[st_.cq_start[c] : st_.cq_start[c + 1]]] += 1
+        assert (room + taken == problem.n_conflicts).all() and not need.any()
+        room[:] = problem.n_conflicts
 
 
 def _alone(
-    ctx: SolveContext, current: reinsert._Incumbent, robot: int, price: float, rounds: int
+    ctx: SolveContext,
+    current: reinsert._Incumbent,
+    robot: int,
+    price: float,
+    rounds: int,
+    last_more: bool,
 ) -> tuple[float, Assignments]:
-    """``robot`` put back alone into ``current``, every other robot held -> its part of
-    the objective plus the price of its pushes, and the answer."""
+    """``robot`` put back alone into ``current``, every other robot held (with
+    ``last_more``, as the last robot of its order may, taking more following-type
+    conflicts) -> its part of the objective plus the price of its pushes, and the
+    answer."""
     static = reinsert._Static.of(ctx)
     order = np.array([robot])
     freed = reinsert._freed(static, order, ctx.problem.n_conflicts)
@@ -308,7 +340,7 @@ def _alone(
     weight = ctx.evaluator.objective_weights(ctx.objective)
     cost, failed = reinsert._repair(
         order, static, current.delay.copy(), current.latest.copy(), current.pos.copy(), room,
-        a_first, following, weight, current.following, price, rounds, NO_REACH,
+        a_first, following, weight, current.following, price, rounds, last_more, NO_REACH,
     )  # fmt: skip
     assert failed == -1
     return cost, Assignments.single(a_first, following)
