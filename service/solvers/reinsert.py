@@ -173,10 +173,12 @@ ROOM_ROUNDS = 4
 # passage it replaces (no robot put back after it can starve). Read at each call. Measured
 # (session 54, ``python -m bench.ab``, 1 s, wh_two_way and wh_two_lane of 100 and 250,
 # three worlds, two seeds): 0.9439 -> 0.9540 (16 cheaper, 8 dearer of 24; every family
-# better). A rule for every robot, taking more wherever every clique it fills keeps room
-# for all the may-be-following conflicts of the robots not yet put back (their count per
-# clique kept up to date through the repair; `/tmp/s54/reinsert_demand.py`): 0.9480 ->
-# 0.9555 (15 / 9), no better, with an (M,) count per repair; not kept.
+# better); wh_one_way, wh_mixed, wh_parked 100 and wh_one_way, wh_mixed 250 (two worlds)
+# 0.9633 -> 0.9817 (15 / 5); avg_delay 0.8656 -> 0.8910 (15 / 5). A rule for every
+# robot, taking more wherever every clique it fills keeps room for all the
+# may-be-following conflicts of the robots not yet put back (their count per clique kept
+# up to date through the repair): 0.9480 -> 0.9555 (15 / 9), no better, with an (M,)
+# count per repair; not kept.
 ROOM_LAST_MORE = True
 # Random orders tried per step while annealing is hot (ReinsertConfig.hot_orders; once
 # cold, ReinsertConfig.orders). Measured (session 37; ``auto`` through the dispatcher on
@@ -1351,9 +1353,7 @@ def _roomier(
         )  # fmt: skip
         if found < 0 or d[e0 + n - 1] + found / max(own, 1e-300) >= score - TOL:
             break  # none better (dropping more only makes it dearer)
-        if (more or chosen.sum() <= was[2].sum()) and _take_rooms(
-            st, st.rc_conf[js[chosen]], room
-        ):
+        if (more or chosen.sum() <= was[2].sum()) and _take_rooms(st, st.rc_conf[js[chosen]], room):
             return found
         if not _drop_overfilling(st, js, chosen, follow, room, need):
             break
