@@ -698,19 +698,17 @@ def _repair(
                 c = st.rc_conf[js[i]]
                 if st.rc_may_follow[js[i]] and preferred[c] == first_pass:
                     follow[i] = _take_room(st, c, room)
-        pushed = _passage_of(
-            st, js, kidx, ranks.size, follow, e0, ev_node, n_nodes, d, latest, price, own,
-            gap, first, chosen, bound_node, bound_force, reach.size > 0,
+        passing = _Passing(
+            js, kidx, ranks.size, e0, ev_node, n_nodes, latest, price, own, bound_node,
+            bound_force, reach.size > 0,
         )  # fmt: skip
+        pushed = _passage_of(st, passing, follow, d, gap, first, chosen)
         if pushed < 0:
             return np.inf, n_placed
         _give_back(st, st.rc_conf[js[follow & ~chosen]], room)  # the room it did not need
         if rounds > 0 and (st.rc_may_follow[js] & ~follow).any():  # room was short
-            pushed = _roomier(
-                st, js, kidx, ranks.size, e0, ev_node, n_nodes, d, latest, price, own, gap,
-                first, chosen, bound_node, bound_force, reach.size > 0, pushed, room, need,
-                rounds, last_more and n_placed == order.size - 1,
-            )  # fmt: skip
+            last = last_more and n_placed == order.size - 1
+            pushed = _roomier(st, passing, d, gap, first, chosen, pushed, room, need, rounds, last)
         cost += pushed
         for i in range(k):
             c = st.rc_conf[js[i]]
@@ -724,38 +722,44 @@ def _repair(
     return cost, -1
 
 
+class _Passing(NamedTuple):
+    """A robot's passage in a repair, what :func:`_passage_of` and :func:`_roomier` read
+    besides the following-type allowed and their outputs (K slots with placed partners,
+    N events, B order bounds; the fields as :func:`_passage`'s arguments)."""
+
+    js: np.ndarray  # (K,) int
+    kidx: np.ndarray  # (K,) int
+    m: int
+    e0: int
+    ev_node: np.ndarray  # (N,) int
+    n_nodes: int
+    latest: np.ndarray  # (E+1,) float
+    price: float
+    own: float
+    bound_node: np.ndarray  # (B,) int
+    bound_force: np.ndarray  # (B,) int
+    bounded: bool  # a plan's order bounds are set
+
+
 @numba.njit(cache=True, nogil=True)
 def _passage_of(
     st: _Static,
-    js: np.ndarray,
-    kidx: np.ndarray,
-    m: int,
-    follow: np.ndarray,
-    e0: int,
-    ev_node: np.ndarray,
-    n_nodes: int,
-    d: np.ndarray,
-    latest: np.ndarray,
-    price: float,
-    own: float,
-    gap: np.ndarray,
-    first: np.ndarray,
-    chosen: np.ndarray,
-    bound_node: np.ndarray,
-    bound_force: np.ndarray,
-    bounded: bool,
+    pa: _Passing,
+    follow: np.ndarray,  # (K,) bool, following-type allowed
+    d: np.ndarray,  # (E+1,) float
+    gap: np.ndarray,  # (n_nodes,) int, out
+    first: np.ndarray,  # (K,) bool, out
+    chosen: np.ndarray,  # (K,) bool, out
 ) -> float:
     """:func:`_passage` with deadlines, then (only where a plan's order bounds are set,
-    ``bounded``, and it found none) without: arguments and result as there."""
-    pushed = _passage(
-        st, js, kidx, m, follow, e0, ev_node, n_nodes, d, latest, price, own, gap, first,
-        chosen, bound_node, bound_force, True,
-    )  # fmt: skip
-    if pushed < 0 and bounded:
-        pushed = _passage(
-            st, js, kidx, m, follow, e0, ev_node, n_nodes, d, latest, price, own, gap, first,
-            chosen, bound_node, bound_force, False,
-        )  # fmt: skip
+    ``pa.bounded``, and it found none) without: arguments and result as there."""
+    pushed = -1.0
+    for deadlines in (True, False):
+        if pushed < 0 and (deadlines or pa.bounded):
+            pushed = _passage(
+                st, pa.js, pa.kidx, pa.m, follow, pa.e0, pa.ev_node, pa.n_nodes, d, pa.latest,
+                pa.price, pa.own, gap, first, chosen, pa.bound_node, pa.bound_force, deadlines,
+            )  # fmt: skip
     return pushed
 
 
@@ -1313,22 +1317,11 @@ def _take_rooms(st: _Static, conflicts: np.ndarray, room: np.ndarray) -> bool:
 @numba.njit(cache=True, nogil=True)
 def _roomier(
     st: _Static,
-    js: np.ndarray,
-    kidx: np.ndarray,
-    m: int,
-    e0: int,
-    ev_node: np.ndarray,
-    n_nodes: int,
-    d: np.ndarray,
-    latest: np.ndarray,
-    price: float,
-    own: float,
-    gap: np.ndarray,
-    first: np.ndarray,
-    chosen: np.ndarray,
-    bound_node: np.ndarray,
-    bound_force: np.ndarray,
-    bounded: bool,
+    pa: _Passing,
+    d: np.ndarray,  # (E+1,) float
+    gap: np.ndarray,  # (n_nodes,) int
+    first: np.ndarray,  # (K,) bool
+    chosen: np.ndarray,  # (K,) bool
     pushed: float,  # the passage found (gap, first, chosen, its delays in d) and its price
     room: np.ndarray,  # (Q,) int, its following-type conflicts' room taken
     need: np.ndarray,  # (Q,) int zeros, scratch
@@ -1338,20 +1331,18 @@ def _roomier(
     """The robot's passage where room was short for its following-type: as if every
     binding clique had room (following-type wherever allowed at all), then again without
     the conflicts that overfilled a clique (:func:`_drop_overfilling`), up to ``rounds``
-    passages; the first that fits replaces the passage found (arguments as
-    :func:`_passage_of`, outputs rewritten, its room taken) where it is cheaper for the
-    robot and takes no more following-type conflicts -> the price of the passage kept."""
-    n = ev_node.size
+    passages; the first that fits replaces the passage found (outputs as
+    :func:`_passage_of`'s, rewritten; its room taken) where it is cheaper for the
+    robot and (unless ``more``) takes no more following-type conflicts -> the price of
+    the passage kept."""
+    js, e0, n, own = pa.js, pa.e0, pa.ev_node.size, max(pa.own, 1e-300)
     was = (gap.copy(), first.copy(), chosen.copy(), d[e0 : e0 + n].copy())
-    score = d[e0 + n - 1] + pushed / max(own, 1e-300)
+    score = d[e0 + n - 1] + pushed / own
     _give_back(st, st.rc_conf[js[chosen]], room)
     follow = st.rc_may_follow[js].copy()
     for _ in range(rounds):
-        found = _passage_of(
-            st, js, kidx, m, follow, e0, ev_node, n_nodes, d, latest, price, own, gap, first,
-            chosen, bound_node, bound_force, bounded,
-        )  # fmt: skip
-        if found < 0 or d[e0 + n - 1] + found / max(own, 1e-300) >= score - TOL:
+        found = _passage_of(st, pa, follow, d, gap, first, chosen)
+        if found < 0 or d[e0 + n - 1] + found / own >= score - TOL:
             break  # none better (dropping more only makes it dearer)
         if (more or chosen.sum() <= was[2].sum()) and _take_rooms(st, st.rc_conf[js[chosen]], room):
             return found

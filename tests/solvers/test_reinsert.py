@@ -285,31 +285,26 @@ def test_a_roomier_passage_never_takes_more_following_type(
         gap = np.empty(n_nodes, dtype=np.int64)
         first, chosen = np.empty(js.size, dtype=bool), np.empty(js.size, dtype=bool)
         delay, ev_node = current.delay.copy(), st_.ev_node[e0:e1]
-        args = (st_, js, kidx, ranks.size)
-        rest = (e0, ev_node, n_nodes, delay, current.latest, np.inf, 1.0, gap, first, chosen)
-        pushed = reinsert._passage_of(
-            *args, np.zeros(js.size, dtype=bool), *rest, NO_BOUND, NO_BOUND, False
-        )
+        passing = reinsert._Passing(
+            js, kidx, ranks.size, e0, ev_node, n_nodes, current.latest, np.inf, 1.0, NO_BOUND,
+            NO_BOUND, False,
+        )  # fmt: skip
+        outputs = (gap, first, chosen)
+        pushed = reinsert._passage_of(st_, passing, np.zeros(js.size, dtype=bool), delay, *outputs)
         if pushed < 0:
             continue  # fixed directions against held times
         was = (gap.copy(), first.copy(), delay[e0:e1].copy())
-        kept = reinsert._roomier(
-            *args, *rest, NO_BOUND, NO_BOUND, False, pushed, room, need, reinsert.ROOM_ROUNDS,
-            False,
-        )  # fmt: skip
+        rounds = reinsert.ROOM_ROUNDS
+        kept = reinsert._roomier(st_, passing, delay, *outputs, pushed, room, need, rounds, False)
         assert kept == pushed and not chosen.any()
         assert np.array_equal(gap, was[0]) and np.array_equal(first, was[1])
         assert np.array_equal(delay[e0:e1], was[2])
         assert (room == problem.n_conflicts).all() and not need.any()
-        kept = reinsert._roomier(
-            *args, *rest, NO_BOUND, NO_BOUND, False, pushed, room, need, reinsert.ROOM_ROUNDS,
-            True,
-        )  # fmt: skip
+        kept = reinsert._roomier(st_, passing, delay, *outputs, pushed, room, need, rounds, True)
         roomy = current.delay.copy()  # as if there were room for every conflict:
         price = reinsert._passage_of(
-            *args, st_.rc_may_follow[js].copy(), e0, ev_node, n_nodes, roomy, current.latest,
-            np.inf, 1.0, gap.copy(), first.copy(), chosen.copy(), NO_BOUND, NO_BOUND, False,
-        )  # fmt: skip
+            st_, passing, st_.rc_may_follow[js].copy(), roomy, *(x.copy() for x in outputs)
+        )
         least = min(was[2][-1] + pushed, roomy[e1 - 1] + price)
         assert delay[e1 - 1] + kept == pytest.approx(least)
         taken = np.zeros_like(room)  # (Q,) the chosen conflicts' binding cliques, counted
