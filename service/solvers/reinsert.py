@@ -665,7 +665,7 @@ def _repair(
     pass first, or that its bounds put after it, whose times it cannot meet."""
     placed = np.ones(st.rc_start.size - 1, dtype=np.bool_)
     placed[order] = False
-    need = np.zeros(room.size, dtype=np.int64)  # (Q,) scratch of _drop_overfilling
+    need = np.zeros(room.size if rounds > 0 else 0, dtype=np.int64)  # (Q,) _roomier's scratch
     cost = 0.0
     bound_node, bound_force = np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64)
     bound_pos = np.empty(0)  # no bounds (a search's repair): none found per robot

@@ -275,6 +275,7 @@ def test_a_roomier_passage_never_takes_more_following_type(
     st_, current = reinsert._Static.of(ctx), _incumbent(ctx)
     room = np.full(ctx.cliques.budget.size, problem.n_conflicts, dtype=np.int64)
     need = np.zeros(room.size, dtype=np.int64)
+    rounds = reinsert.ROOM_ROUNDS
     for robot in range(problem.n_robots):
         js = np.arange(st_.rc_start[robot], st_.rc_start[robot + 1])
         e0, e1 = st_.ev_start[robot], st_.ev_start[robot + 1]
@@ -294,7 +295,6 @@ def test_a_roomier_passage_never_takes_more_following_type(
         if pushed < 0:
             continue  # fixed directions against held times
         was = (gap.copy(), first.copy(), delay[e0:e1].copy())
-        rounds = reinsert.ROOM_ROUNDS
         kept = reinsert._roomier(st_, passing, delay, *outputs, pushed, room, need, rounds, False)
         assert kept == pushed and not chosen.any()
         assert np.array_equal(gap, was[0]) and np.array_equal(first, was[1])
