@@ -128,11 +128,12 @@ class Config:
     target_budget: float | None = 5.0  # run by TARGET_METHOD only (None: not)
     sets: tuple[str, ...] = (*LARGE_SETS, "geo_10")
     per_set: int | None = None
-    # Generated worlds as "kind:robots" (service.scenarios.KINDS); dense floors of 50 robots
-    # are floor_sparse: no floor_dense world of 50 robots had paths the service accepts.
+    # Generated worlds as "kind:robots" (service.scenarios.KINDS): issue 11's warehouses of
+    # 25-250 robots and dense floors of 25-100 (until session 55 no floor_dense world of 50
+    # robots had paths the service accepts, see service/scenarios/floor.py), and a sparse one.
     worlds: tuple[str, ...] = (
         *(f"{kind}:{n}" for kind in ("wh_two_way", "wh_two_lane") for n in (25, 100, 250)),
-        "floor_dense:25",
+        *(f"floor_dense:{n}" for n in (25, 50, 100)),
         "floor_sparse:50",
     )
     per_world: int = 1

@@ -8,9 +8,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from service.core.problem import problem_from_request
+from service.core.schemas import ScheduleRequest
+from service.datagen import worlds
 from service.datagen.config import ScenarioConfig
 from service.datagen.worlds import draw_world, robot_count
-from service.scenarios import KINDS, generate
+from service.scenarios import KINDS, World, generate
 
 
 @given(
@@ -52,14 +54,25 @@ def test_a_seed_gives_the_same_world() -> None:
     assert first.request.model_dump() == again.request.model_dump()
 
 
-def test_refused_worlds_are_redrawn_and_counted() -> None:
-    # floor_dense at 20-40 robots: most worlds are refused (their fixed paths leave no order)
+def test_refused_worlds_are_redrawn_and_counted(monkeypatch: pytest.MonkeyPatch) -> None:
+    # The service refuses the first two worlds drawn (as it does paths that leave no order).
+    calls: list[int] = []
+    real = worlds.derived_request
+
+    def refusing(world: World) -> ScheduleRequest | None:
+        calls.append(1)
+        return None if len(calls) <= 2 else real(world)
+
     cfg = ScenarioConfig(kinds=("floor_dense",), robots=(20, 40))
+    first = draw_world(cfg, 0)
+    monkeypatch.setattr(worlds, "derived_request", refusing)
     drawn = draw_world(cfg, 0)
-    assert drawn.redraws >= 1
-    assert draw_world(ScenarioConfig(cfg.kinds, cfg.robots, drawn.redraws + 1), 0) == drawn
+    assert (first.redraws, drawn.redraws) == (0, 2) and drawn.seed != first.seed
+    calls.clear()
+    assert draw_world(cfg, 0) == drawn
+    calls.clear()
     with pytest.raises(RuntimeError, match="no usable world"):
-        draw_world(ScenarioConfig(cfg.kinds, cfg.robots, max_redraws=drawn.redraws), 0)
+        draw_world(ScenarioConfig(cfg.kinds, cfg.robots, max_redraws=2), 0)
 
 
 def test_unknown_kinds_and_empty_ranges_are_refused() -> None:
