@@ -25,7 +25,7 @@ from typing import Any
 from bench.anytime import target_group
 from bench.report import cost_ratio, delay_ratio, nanmean
 
-__all__ = ["load_runs", "main", "table", "yardsticks"]
+__all__ = ["load_runs", "main", "problem", "table", "yardsticks"]
 
 Row = dict[str, Any]
 
@@ -47,27 +47,33 @@ def load_runs(paths: Sequence[Path]) -> dict[str, list[Row]]:
     return runs
 
 
-def yardsticks(runs: dict[str, list[Row]]) -> dict[str, float]:
-    """Each problem's least known cost: its reference (a proven optimum on the conformance
-    sets) and every cost any run found, by problem name."""
-    best: dict[str, float] = {}
+def problem(row: Row) -> tuple[str, float]:
+    """A row's problem: its name and its free cost (a world that a changed generator made
+    anew under the same name is another problem)."""
+    return row["name"], round(row["free"], 9)
+
+
+def yardsticks(runs: dict[str, list[Row]]) -> dict[tuple[str, float], float]:
+    """Each problem's (:func:`problem`) least known cost: its reference (a proven optimum
+    on the conformance sets) and every cost any run found."""
+    best: dict[tuple[str, float], float] = {}
     for rows in runs.values():
         for r in rows:
             known = [r["cost"]] + ([] if r.get("ref_cost") is None else [r["ref_cost"]])
-            best[r["name"]] = min([best.get(r["name"], float("inf")), *known])
+            best[problem(r)] = min([best.get(problem(r), float("inf")), *known])
     return best
 
 
 def table(runs: dict[str, list[Row]]) -> str:
     """Markdown: per group, family and budget (and each group's "all"), each run's mean
-    cost ratio / delay ratio against :func:`yardsticks`, on the problems (names) that
-    every run measured at that budget; n counts one run's rows there."""
+    cost ratio / delay ratio against :func:`yardsticks`, on the problems that every run
+    measured at that budget; n counts one run's rows there."""
     best = yardsticks(runs)
     labels = list(runs)
     budgets = {r["budget_s"] for rows in runs.values() for r in rows}
     shared = {  # by budget, the problems every run measured
         b: set.intersection(
-            *({r["name"] for r in rows if r["budget_s"] == b} for rows in runs.values())
+            *({problem(r) for r in rows if r["budget_s"] == b} for rows in runs.values())
         )
         for b in budgets
     }
@@ -76,9 +82,9 @@ def table(runs: dict[str, list[Row]]) -> str:
     )
     for label, rows in runs.items():
         for r in rows:
-            if r["name"] not in shared[r["budget_s"]]:
+            if problem(r) not in shared[r["budget_s"]]:
                 continue
-            ref = best[r["name"]]
+            ref = best[problem(r)]
             rated = (cost_ratio(ref, r["cost"]), delay_ratio(ref, r["cost"], r["free"]))
             group = target_group(r["family"]) or "other"
             source = "conformance" if r["conformance"] else "generated"

@@ -28,7 +28,7 @@ def test_each_problem_is_rated_against_the_least_cost_any_run_or_reference_knows
     before = _write(tmp_path / "a.json", [_row("wh_two_way 100/0", 20.0, ref_cost=14.0)])
     after = _write(tmp_path / "b.json", [_row("wh_two_way 100/0", 15.0)])
     runs = load_runs([before, after])
-    assert yardsticks(runs) == {"wh_two_way 100/0": 14.0}
+    assert yardsticks(runs) == {("wh_two_way 100/0", 10.0): 14.0}
     line = next(x for x in table(runs).splitlines() if "| wh_two_way 100 |" in x)
     # 14 / 20 and (14 - 10) / (20 - 10); 14 / 15 and 4 / 5
     assert line.endswith("| 1 | 0.7000 / 0.400 | 0.9333 / 0.800 |")
@@ -41,6 +41,9 @@ def test_only_problems_every_run_measured_at_a_budget_count(tmp_path: Path) -> N
     text = table(load_runs([one, two]))
     assert "| wh_25 | 1 s | 1 | 1.0000 / 1.000 | 1.0000 / 1.000 |" in text
     assert "5 s" not in text  # wh_25/1 at 5 s: the first run never measured it
+    # the same name, another world (its free cost): not the same problem
+    anew = _write(tmp_path / "c.json", [_row("wh_25/0", 9.0, free=8.0)])
+    assert "| wh_25 |" not in table(load_runs([one, anew]))
 
 
 def test_variants_and_methods_of_one_file_are_runs_of_their_own(tmp_path: Path) -> None:
