@@ -20,8 +20,7 @@ comes first, improving in stages:
    (:mod:`service.solvers.reinsert`: neighbourhoods repaired by prioritized planning,
    ~1-4 ms a step) in turns (:mod:`service.solvers.turns`), with
    REINSERT_SHARE of the time left, or to the deadline where no later stage runs. Below
-   ``lns_min_conflicts`` too, from MID_TURNS_MIN_CONFLICTS, where less than
-   MID_TURNS_BELOW_S are left (avg_delay: at every budget): the plans and the turns, with
+   ``lns_min_conflicts`` too, from MID_TURNS_MIN_CONFLICTS: the plans and the turns, with
    MID_TURNS_SHARE;
 3. **large-neighbourhood search** (above ``exact_max_conflicts`` up to
    ``exact_stage_max_conflicts``, for the objectives that are sums): CP-SAT re-plans
@@ -261,10 +260,9 @@ REINSERT_SHARE = 0.43
 # Seconds left at least, by objective.
 MID_LNS_LEAST_S = {"avg_completion": 2.0, "avg_delay": 4.0}
 # From MID_TURNS_MIN_CONFLICTS (and above ``exact_max_conflicts``) to below
-# ``lns_min_conflicts``, with less than MID_TURNS_BELOW_S of its objective left at the start
-# (avg_completion, avg_delay; not a re-schedule), the first stage is the plans then the
-# re-insertion turns for MID_TURNS_SHARE of the time left, in place of the policy's
-# large solver (priority_tabu); LNS and the CP-SAT stage follow as after it. Where LNS
+# ``lns_min_conflicts`` (avg_completion, avg_delay; not a re-schedule), the first stage is
+# the plans then the re-insertion turns for MID_TURNS_SHARE of the time left, in place of
+# the policy's large solver (priority_tabu); LNS and the CP-SAT stage follow as after it. Where LNS
 # converges on a local optimum (a plateau at the whole fleet unproven) the CP-SAT stage
 # of one worker rarely leaves it: wh_two_way/25/60 read 0.954 at 5 s, LNS done at 0.9 s.
 # Measured (session 42, ``python -m bench.ab``, interleaved, 1 s, turns first / not; every
@@ -284,8 +282,14 @@ MID_LNS_LEAST_S = {"avg_completion": 2.0, "avg_delay": 4.0}
 # 0.9903 / 0.9998 (2 cheaper, 7 dearer of 24; proven 12 / 12), on other worlds (`--seed
 # 500000`, those kinds, wh_two_lane 25, wh_mixed 50, floor_dense 25, two worlds, two
 # seeds) 0.9722 / 0.9863 (5 / 12; proven 8 / 8); avg_completion the same way 0.9973 /
-# 0.9972 (3 / 4; proven 14 / 14). Seconds left at the start, below which, by objective.
-MID_TURNS_BELOW_S = {"avg_completion": 2.0, "avg_delay": math.inf}
+# 0.9972 (3 / 4; proven 14 / 14). avg_completion too at every budget since session 55
+# (the scenario generator's floors of 50 robots derivable: at 5 s they read no better than
+# at 1 s), measured (``python -m bench.ab``, 5 s, below 2 s against every budget): floor
+# kinds dense, sparse, passages and mixed of 50 robots, wh_two_way 50, wh_one_way 50
+# (``--seed 500000``, two worlds, two seeds) 0.9875 / 0.9960 (4 cheaper, 14 dearer of 24;
+# one-way 0.971 -> 0.993, mixed floors 0.986 -> 1.000); floor_dense, floor_sparse,
+# wh_two_way, wh_two_lane 50 and the sets wh_50, geo_dense_25 (two seeds) 0.9970 / 0.9981
+# (4 / 7; two-lane 1.000 -> 0.998), proven 28 / 28 either way.
 MID_TURNS_SHARE = 0.1
 MID_TURNS_MIN_CONFLICTS = 200
 # From ``lns_min_conflicts`` conflicts the first stage is the cheapest of PLANNED_ORDERS
@@ -389,13 +393,12 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
         and problem.n_conflicts > ctx.exact_max_conflicts
         and problem.n_conflicts >= ctx.lns_min_conflicts
     )
-    mid_turns = (  # the turns as a (short) budget's first stage below lns_min_conflicts
+    mid_turns = (  # the turns as the first stage below lns_min_conflicts
         ctx.objective in REINSERT_OBJECTIVES
         and max(ctx.exact_max_conflicts + 1, MID_TURNS_MIN_CONFLICTS)
         <= problem.n_conflicts
         < ctx.lns_min_conflicts
         and ctx.warm is None
-        and deadline - time.monotonic() < MID_TURNS_BELOW_S[ctx.objective]
     )
     # A re-schedule starts from its previous answer (tabu search, below), not from plans.
     plans, planned = (reinserts or mid_turns) and ctx.warm is None, None

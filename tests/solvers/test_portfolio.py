@@ -276,17 +276,15 @@ def test_from_lns_min_conflicts_re_insertion_follows_the_first_stage(
     assert answer.checks.acyclic and answer.checks.density
 
 
-@pytest.mark.parametrize(
-    ("below_s", "min_conflicts", "turns"), [(2.0, 0, True), (0.5, 0, False), (2.0, 10_000, False)]
-)
-def test_a_short_budget_below_lns_min_conflicts_starts_with_the_turns(
-    below_s: float, min_conflicts: int, turns: bool, monkeypatch: pytest.MonkeyPatch
+@pytest.mark.parametrize(("min_conflicts", "turns"), [(0, True), (10_000, False)])
+def test_below_lns_min_conflicts_the_first_stage_is_the_turns(
+    min_conflicts: int, turns: bool, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """Between exact_max_conflicts (and MID_TURNS_MIN_CONFLICTS) and lns_min_conflicts, a
-    budget under MID_TURNS_BELOW_S starts with the plans and the turns for MID_TURNS_SHARE
-    of the time left, in place of the large solver (priority_tabu); a longer budget or a
-    smaller problem with the large solver, not the turns. Either way LNS follows; the
-    answer is valid, no better than the proven optimum, and comes within the budget."""
+    solve starts with the plans and the turns for MID_TURNS_SHARE of the time left, in
+    place of the large solver (priority_tabu); a smaller problem with the large solver, not
+    the turns. Either way LNS follows; the answer is valid, no better than the proven
+    optimum, and comes within the budget."""
     import service.solvers.portfolio as portfolio
 
     untils: list[float] = []
@@ -305,7 +303,6 @@ def test_a_short_budget_below_lns_min_conflicts_starts_with_the_turns(
 
     monkeypatch.setattr(portfolio, "take_turns", recorded)
     monkeypatch.setattr(portfolio, "lns_search", lns_recorded)
-    monkeypatch.setattr(portfolio, "MID_TURNS_BELOW_S", {"avg_completion": below_s})
     monkeypatch.setattr(portfolio, "MID_TURNS_MIN_CONFLICTS", min_conflicts)
     line = json.loads((DATA / "wh_25.jsonl").read_text().splitlines()[0])
     body = {**line["request"], "options": {"solver": "auto", "time_limit_s": 1.0}}
@@ -325,13 +322,13 @@ def test_a_short_budget_below_lns_min_conflicts_starts_with_the_turns(
     assert answer.checks.acyclic and answer.checks.density
 
 
-@pytest.mark.parametrize("objective", ["avg_completion", "avg_delay"])
-def test_avg_delay_starts_with_the_turns_at_longer_budgets_too(
+@pytest.mark.parametrize("objective", ["avg_completion", "avg_delay", "max_completion"])
+def test_the_sums_start_with_the_turns_at_longer_budgets_too(
     objective: str, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """MID_TURNS_BELOW_S by objective: with 2.5 s, between exact_max_conflicts and
-    lns_min_conflicts, avg_delay starts with the plans and the turns, avg_completion with
-    the large solver (from 2 s)."""
+    """With 2.5 s, between exact_max_conflicts and lns_min_conflicts, avg_completion and
+    avg_delay (re-insertion's objectives) start with the plans and the turns, others with
+    the large solver."""
     import service.solvers.portfolio as portfolio
 
     monkeypatch.setattr(portfolio, "MID_TURNS_MIN_CONFLICTS", 0)
@@ -340,7 +337,7 @@ def test_avg_delay_starts_with_the_turns_at_longer_budgets_too(
     body = {**line["request"], "objective": objective, "options": options}
     policy = DispatchPolicy(exact_max_conflicts=0, lns_min_conflicts=10_000)
     detail = dispatch(ScheduleRequest.model_validate(body), policy).solver.detail
-    if objective == "avg_delay":
+    if objective != "max_completion":
         assert detail.startswith("planned") and "priority_tabu" not in detail
     else:
         assert "priority_tabu" in detail
