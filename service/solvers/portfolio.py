@@ -259,37 +259,35 @@ REINSERT_SHARE = 0.43
 # 0.9428, 11 / 5), so from 4 s left.
 # Seconds left at least, by objective.
 MID_LNS_LEAST_S = {"avg_completion": 2.0, "avg_delay": 4.0}
-# From MID_TURNS_MIN_CONFLICTS (and above ``exact_max_conflicts``) to below
-# ``lns_min_conflicts`` (avg_completion, avg_delay; not a re-schedule), the first stage is
-# the plans then the re-insertion turns for MID_TURNS_SHARE of the time left, in place of
-# the policy's large solver (priority_tabu); LNS and the CP-SAT stage follow as after it. Where LNS
-# converges on a local optimum (a plateau at the whole fleet unproven) the CP-SAT stage
-# of one worker rarely leaves it: wh_two_way/25/60 read 0.954 at 5 s, LNS done at 0.9 s.
-# Measured (session 42, ``python -m bench.ab``, interleaved, 1 s, turns first / not; every
-# problem of 60-700 conflicts turned first): generated wh_two_way 25 (210-252 conflicts),
-# wh_two_lane 25 (128-138), floor_dense 25 (146-172), floor_sparse 50 (515-540), three
-# worlds each, and the conformance sets wh_25, wh_50, wh_100, geo_dense_25 (four seeds):
-# avg_completion two-way 0.9852 / 0.9680 (8 cheaper, 2 dearer of 12), sparse floors 0.9775
-# / 0.9754 (7 / 1), two-lane 1.0000 / 0.9991, dense floors 1.0000 / 0.9996, the sets 0.9999
-# - 1.0000 either way (62 / 63 of 144 runs proven); avg_delay (two seeds) two-way 0.966 /
-# 0.896, sparse floors 0.984 / 0.967, but two-lane 0.984 / 0.999 (0 / 2) and dense floors
-# 0.989 / 1.000 (0 / 2): below 200 conflicts the plain order keeps them. Measured with
-# MID_TURNS_SHARE 0.3 in session 41: fewer proofs at 5 s; so short budgets only, for
-# avg_completion. avg_delay at every budget since re-insertion holds its robots by their
-# completions (``Evaluator.held_weights``): measured (session 50, ``python -m bench.ab
-# --objective avg_delay``, 5 s, 2.0 against every budget; wh_two_way 25, floor_sparse 50,
-# wh_two_way 50, wh_one_way 50, three worlds, and the sets wh_100, geo_dense_25, one seed)
-# 0.9903 / 0.9998 (2 cheaper, 7 dearer of 24; proven 12 / 12), on other worlds (`--seed
-# 500000`, those kinds, wh_two_lane 25, wh_mixed 50, floor_dense 25, two worlds, two
-# seeds) 0.9722 / 0.9863 (5 / 12; proven 8 / 8); avg_completion the same way 0.9973 /
-# 0.9972 (3 / 4; proven 14 / 14). avg_completion too at every budget since session 55
-# (the scenario generator's floors of 50 robots derivable: at 5 s they read no better than
-# at 1 s), measured (``python -m bench.ab``, 5 s, below 2 s against every budget): floor
-# kinds dense, sparse, passages and mixed of 50 robots, wh_two_way 50, wh_one_way 50
-# (``--seed 500000``, two worlds, two seeds) 0.9875 / 0.9960 (4 cheaper, 14 dearer of 24;
-# one-way 0.971 -> 0.993, mixed floors 0.986 -> 1.000); floor_dense, floor_sparse,
-# wh_two_way, wh_two_lane 50 and the sets wh_50, geo_dense_25 (two seeds) 0.9970 / 0.9981
-# (4 / 7; two-lane 1.000 -> 0.998), proven 28 / 28 either way.
+# From MID_TURNS_MIN_CONFLICTS (and above ``exact_max_conflicts``) to below ``lns_min_conflicts``
+# (avg_completion, avg_delay; not a re-schedule), the first stage is the plans then the
+# re-insertion turns for MID_TURNS_SHARE of the time left, in place of the policy's large solver
+# (priority_tabu); LNS and the CP-SAT stage follow as after it. Where LNS converges on a local
+# optimum (a plateau at the whole fleet unproven) the CP-SAT stage of one worker rarely leaves it:
+# wh_two_way/25/60 read 0.954 at 5 s, LNS done at 0.9 s. Measured (session 42, ``python -m
+# bench.ab``, interleaved, 1 s, turns first / not; every problem of 60-700 conflicts turned
+# first): generated wh_two_way 25 (210-252 conflicts), wh_two_lane 25 (128-138), floor_dense 25
+# (146-172), floor_sparse 50 (515-540), three worlds each, and the conformance sets wh_25, wh_50,
+# wh_100, geo_dense_25 (four seeds): avg_completion two-way 0.9852 / 0.9680 (8 cheaper, 2 dearer
+# of 12), sparse floors 0.9775 / 0.9754 (7 / 1), two-lane 1.0000 / 0.9991, dense floors 1.0000 /
+# 0.9996, the sets 0.9999 - 1.0000 either way (62 / 63 of 144 runs proven); avg_delay (two seeds)
+# two-way 0.966 / 0.896, sparse floors 0.984 / 0.967, but two-lane 0.984 / 0.999 (0 / 2) and dense
+# floors 0.989 / 1.000 (0 / 2): below 200 conflicts the plain order keeps them. Measured with
+# MID_TURNS_SHARE 0.3 in session 41: fewer proofs at 5 s; so short budgets only (until session 55)
+# for avg_completion. avg_delay at every budget since re-insertion holds its robots by their
+# completions (``Evaluator.held_weights``): measured (session 50, ``python -m bench.ab --objective
+# avg_delay``, 5 s, 2.0 against every budget; wh_two_way 25, floor_sparse 50, wh_two_way 50,
+# wh_one_way 50, three worlds, and the sets wh_100, geo_dense_25, one seed) 0.9903 / 0.9998 (2
+# cheaper, 7 dearer of 24; proven 12 / 12), on other worlds (`--seed 500000`, those kinds,
+# wh_two_lane 25, wh_mixed 50, floor_dense 25, two worlds, two seeds) 0.9722 / 0.9863 (5 / 12;
+# proven 8 / 8); avg_completion the same way 0.9973 / 0.9972 (3 / 4; proven 14 / 14).
+# avg_completion too at every budget since session 55 (the scenario generator's floors of 50
+# robots derivable: at 5 s they read no better than at 1 s), measured (``python -m bench.ab``, 5
+# s, below 2 s against every budget): floor kinds dense, sparse, passages and mixed of 50 robots,
+# wh_two_way 50, wh_one_way 50 (``--seed 500000``, two worlds, two seeds) 0.9875 / 0.9960 (4
+# cheaper, 14 dearer of 24; one-way 0.971 -> 0.993, mixed floors 0.986 -> 1.000); floor_dense,
+# floor_sparse, wh_two_way, wh_two_lane 50 and the sets wh_50, geo_dense_25 (two seeds) 0.9970 /
+# 0.9981 (4 / 7; two-lane 1.000 -> 0.998), proven 28 / 28 either way.
 MID_TURNS_SHARE = 0.1
 MID_TURNS_MIN_CONFLICTS = 200
 # From ``lns_min_conflicts`` conflicts the first stage is the cheapest of PLANNED_ORDERS
