@@ -146,9 +146,12 @@ def floor(n_robots: int, seed: int, density: float = 0.1, **params: Any) -> Worl
     shapes = walls + clutter(layout, keep_clear, rng)
     reach = fleet.max_radius + ENDPOINT_CLEARANCE + layout.resolution  # above every threshold
     planner = GridPlanner(bounds, shapes, layout.resolution, reach)
-    starts, goals, spare = draw_trips(planner, layout, n_robots, fleet.max_radius, rng)
-    paths = [planner.plan(s, g, r) for s, g, r in zip(starts, goals, radii.tolist(), strict=True)]
-    paths = unblock_starts(planner, Trips(starts, goals, spare), radii, paths)
+    trips = draw_trips(planner, layout, n_robots, fleet.max_radius, rng)
+    paths = [
+        planner.plan(s, g, r)
+        for s, g, r in zip(trips.starts, trips.goals, radii.tolist(), strict=True)
+    ]
+    paths = unblock_starts(planner, trips, radii, paths)
     return World(
         kind="floor",
         params={**dataclasses.asdict(layout), **dataclasses.asdict(fleet)},
@@ -212,7 +215,7 @@ def draw_trips(
     n_robots: int,
     max_radius: float,
     rng: np.random.Generator,
-) -> tuple[list[Cell], list[Cell], list[Cell]]:
+) -> Trips:
     """Start and goal cells of each robot (distinct, mutually reachable, far enough
     apart) and up to SPARE_STARTS x robots spare start cells.
 
@@ -236,7 +239,7 @@ def draw_trips(
         far = np.flatnonzero(distance >= min_trip)
         pick = int(rng.choice(far)) if len(far) else int(np.argmax(distance))
         goals.append(cells[pool.pop(pick)])
-    return cells[:n_robots], goals, cells[2 * n_robots :]
+    return Trips(cells[:n_robots], goals, cells[2 * n_robots :])
 
 
 def spread_cells(
