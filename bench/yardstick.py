@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from bench.anytime import target_group
-from bench.report import cost_ratio, delay_ratio, nanmean
+from bench.report import cost_ratio, delay_ratio, markdown_table, nanmean
 
 __all__ = ["load_runs", "main", "problem", "table", "yardsticks"]
 
@@ -91,24 +91,21 @@ def table(runs: dict[str, list[Row]]) -> str:
             for family in (r["family"], f"all {source}"):
                 cells[(group, family, r["budget_s"])][label].append(rated)
     headers = ["group", "family", "budget", "n", *(f"run {k + 1}" for k in range(len(labels)))]
-    lines = [
-        "| " + " | ".join(headers) + " |",
-        "|" + "---|" * len(headers),
-    ]
 
     def order(key: tuple[str, str, float]) -> tuple:  # by budget and group, "all" first
         group, family, budget = key
         return budget, group, not family.startswith("all "), family
 
-    for (group, family, budget), of in sorted(cells.items(), key=lambda kv: order(kv[0])):
-        n = len(of[labels[0]])
-        rated = [
+    rows = [
+        [group, family, f"{budget:g} s", len(of[labels[0]])]
+        + [
             f"{nanmean([c for c, _ in of[v]]):.4f} / {nanmean([d for _, d in of[v]]):.3f}"
             for v in labels
         ]
-        lines.append(f"| {group} | {family} | {budget:g} s | {n} | " + " | ".join(rated) + " |")
+        for (group, family, budget), of in sorted(cells.items(), key=lambda kv: order(kv[0]))
+    ]
     legend = "\n".join(f"- run {k + 1}: `{label}`" for k, label in enumerate(labels))
-    return f"{legend}\n\n" + "\n".join(lines)
+    return f"{legend}\n\n" + markdown_table(headers, rows)
 
 
 def _parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
