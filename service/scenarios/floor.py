@@ -271,11 +271,15 @@ def spread_cells(
 def start_passings(paths: list[np.ndarray], starts: np.ndarray, radii: np.ndarray) -> np.ndarray:
     """(R, R) bool: robot i's route (paths[i], (N_i, 2)) passes robot j's start footprint
     (``starts`` (R, 2), ``radii`` (R,)) within START_MARGIN, so j must leave first; i != j."""
-    lines = np.array([shapely.LineString(path) for path in paths])  # (R,)
-    gap = shapely.distance(lines[:, None], shapely.points(starts)[None, :])  # (R, R)
-    passes = gap < radii[:, None] + radii[None, :] + START_MARGIN
+    passes = _route_gaps(paths, starts) < radii[:, None] + radii[None, :] + START_MARGIN
     np.fill_diagonal(passes, False)
     return passes
+
+
+def _route_gaps(paths: list[np.ndarray], points: np.ndarray) -> np.ndarray:
+    """(R, P) the least distance from each route (paths[i], (N_i, 2)) to each point (P, 2)."""
+    lines = np.array([shapely.LineString(path) for path in paths])  # (R,)
+    return shapely.distance(lines[:, None], shapely.points(points)[None, :])
 
 
 def waits_order(passes: np.ndarray) -> np.ndarray:
@@ -289,23 +293,23 @@ def waits_order(passes: np.ndarray) -> np.ndarray:
     waited_by = passes.sum(axis=0)  # (R,) routes passing each start, among robots left
     left = np.ones(n, dtype=bool)
     head, tail = [], []
+
+    def take(r: int, into: list[int]) -> None:  # robot r placed: it counts no more
+        into.append(r)
+        left[r] = False
+        waits_for[:] -= passes[:, r]
+        waited_by[:] -= passes[r]
+
     while left.any():
         changed = True
         while changed:  # peel robots that wait for none (first) or that none waits for (last)
             changed = False
             for r in np.flatnonzero(left & ((waits_for == 0) | (waited_by == 0))).tolist():
-                if not left[r]:
-                    continue
-                (head if waits_for[r] == 0 else tail).append(r)
-                left[r], changed = False, True
-                waits_for -= passes[:, r]
-                waited_by -= passes[r]
+                if left[r]:
+                    take(r, head if waits_for[r] == 0 else tail)
+                    changed = True
         if left.any():
-            r = int(np.flatnonzero(left)[np.argmax((waited_by - waits_for)[left])])
-            head.append(r)
-            left[r] = False
-            waits_for -= passes[:, r]
-            waited_by -= passes[r]
+            take(int(np.flatnonzero(left)[np.argmax((waited_by - waits_for)[left])]), head)
     place = np.empty(n, dtype=np.int64)
     place[head + tail[::-1]] = np.arange(n)
     return place
@@ -333,7 +337,8 @@ def unblock_starts(
     fewest, stalled = np.inf, 0  # the fewest waits against the order, rounds since
     for _ in range(UNBLOCK_ROUNDS):
         against = passes & (place[None, :] > place[:, None]) & ~avoided  # (R, R)
-        fewest, stalled = (against.sum(), 0) if against.sum() < fewest else (fewest, stalled + 1)
+        count = int(against.sum())
+        fewest, stalled = (count, 0) if count < fewest else (fewest, stalled + 1)
         if not against.any() or stalled >= UNBLOCK_PATIENCE:
             break
         for i in np.flatnonzero(against.any(axis=1)).tolist():
@@ -376,8 +381,7 @@ def _move_start(
     if not trips.spare:
         return False
     spare = planner.point(np.array(trips.spare))  # (S, 2)
-    lines = np.array([shapely.LineString(path) for path in paths])  # (R,)
-    gap = shapely.distance(lines[:, None], shapely.points(spare)[None, :])  # (R, S)
+    gap = _route_gaps(paths, spare)  # (R, S)
     passed = (gap < radii[:, None] + radii[robot] + START_MARGIN).sum(axis=0)  # (S,)
     passed -= gap[robot] < 2 * radii[robot] + START_MARGIN  # its own route moves with it
     distance = np.linalg.norm(spare - points[robot], axis=1)
