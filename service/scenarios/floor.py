@@ -405,9 +405,7 @@ def _around(
         Disk(float(points[j, 0]), float(points[j, 1]), float(radii[j]) + START_MARGIN)
         for j in np.flatnonzero(avoid)
     ]
-    around = GridPlanner(
-        planner.bounds, [*planner.shapes, *parked], planner.resolution, planner.reach
-    )
+    around = planner.with_obstacles(parked)
     try:
         return around.plan(trips.starts[robot], trips.goals[robot], float(radii[robot]))
     except NoPathError:

@@ -10,6 +10,7 @@ Smoothing shortcuts the grid path wherever the straight segment keeps
 
 from __future__ import annotations
 
+import copy
 import heapq
 import math
 from array import array
@@ -17,6 +18,7 @@ from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 import shapely
 from shapely.geometry.base import BaseGeometry
@@ -81,27 +83,36 @@ class SearchGrid:
 def hop_distances(free: np.ndarray, source: tuple[int, int]) -> np.ndarray:
     """(H * W,) 8-connected hop counts from ``source`` over ``free`` (H, W), inf if unreachable.
 
-    A breadth-first wavefront in numpy: one 3 x 3 dilation per hop. Hops never
-    exceed the grid path cost (a step costs 1 or sqrt 2), so landmark bounds
-    from them stay below the true distances.
+    Hops never exceed the grid path cost (a step costs 1 or sqrt 2), so landmark
+    bounds from them stay below the true distances.
     """
-    distance = np.full(free.shape, np.inf)
-    frontier = np.zeros_like(free)
-    frontier[source] = True
-    reached = frontier.copy()
-    hops = 0
-    while frontier.any():
-        distance[frontier] = hops
-        grown = frontier.copy()
-        grown[1:] |= frontier[:-1]
-        grown[:-1] |= frontier[1:]
-        wide = grown.copy()
-        wide[:, 1:] |= grown[:, :-1]
-        wide[:, :-1] |= grown[:, 1:]
-        frontier = wide & free & ~reached
-        reached |= frontier
-        hops += 1
-    return distance.ravel()
+    return _breadth_first(free, source[0] * free.shape[1] + source[1])
+
+
+@numba.njit(cache=True, nogil=True)
+def _breadth_first(free: np.ndarray, source: int) -> np.ndarray:
+    """(H * W,) hops from flat cell ``source`` over ``free`` (H, W), inf where unreachable:
+    a breadth-first search with a flat queue (each cell enters it once)."""
+    height, width = free.shape
+    open_cells = free.ravel()
+    distance = np.full(height * width, np.inf)
+    queue = np.empty(height * width, dtype=np.int64)
+    distance[source], queue[0] = 0.0, source
+    head, tail = 0, 1
+    while head < tail:
+        u = queue[head]
+        head += 1
+        row, col = u // width, u % width
+        for dy in (-1, 0, 1):
+            for dx in (-1, 0, 1):
+                r, c = row + dy, col + dx
+                if 0 <= r < height and 0 <= c < width:
+                    v = r * width + c
+                    if open_cells[v] and distance[v] == np.inf:
+                        distance[v] = distance[u] + 1.0
+                        queue[tail] = v
+                        tail += 1
+    return distance
 
 
 @dataclass(eq=False)
@@ -118,29 +129,47 @@ class GridPlanner:
     resolution: float
     reach: float  # metres: clearances beyond this are not needed and stored as ``reach``
     clearance: np.ndarray = field(init=False)
-    obstacles: BaseGeometry = field(init=False)
+    obstacles: BaseGeometry = field(init=False)  # the union of the shapes this planner adds
+    _base: GridPlanner | None = field(init=False, default=None)  # the floor it adds them to
     _inflated_by: dict[float, BaseGeometry] = field(init=False, default_factory=dict)
     _grids: dict[float, SearchGrid] = field(init=False, default_factory=dict)
 
     def __post_init__(self) -> None:
-        """Compute the clearance field and the obstacles' union once per floor.
-
-        Capping clearances at ``reach`` lets each obstacle update only the
-        cells within ``reach`` of its bounding box.
-        """
+        """Compute the clearance field and the obstacles' union once per floor."""
         xs, ys = self.cell_centres()
         x, y = np.meshgrid(xs, ys)
         xmin, ymin, xmax, ymax = self.bounds
         clearance = np.minimum.reduce([x - xmin, xmax - x, y - ymin, ymax - y])
-        np.minimum(clearance, self.reach, out=clearance)
-        for shape in self.shapes:
+        self.clearance = np.minimum(clearance, self.reach)
+        self._lower_clearance(self.shapes)
+        self.obstacles = shapely.union_all([s.polygon() for s in self.shapes])
+
+    def with_obstacles(self, extra: Sequence[Shape]) -> GridPlanner:
+        """This floor with the ``extra`` shapes as obstacles too.
+
+        Reuses this floor's clearance field and grown obstacles (only the new
+        shapes' windows and their own union are computed), so a route planned
+        around a few more obstacles costs a search rather than a whole floor.
+        """
+        planner = copy.copy(self)
+        planner.shapes = [*self.shapes, *extra]
+        planner.clearance = self.clearance.copy()
+        planner._lower_clearance(extra)
+        planner.obstacles = shapely.union_all([s.polygon() for s in extra])
+        planner._base, planner._inflated_by, planner._grids = self, {}, {}
+        return planner
+
+    def _lower_clearance(self, shapes: Sequence[Shape]) -> None:
+        """``clearance`` lowered to each shape's distance. Capping clearances at ``reach``
+        lets each shape update only the cells within ``reach`` of its bounding box."""
+        xs, ys = self.cell_centres()
+        for shape in shapes:
             sx0, sy0, sx1, sy1 = shape.bbox
             cols = slice(*np.searchsorted(xs, [sx0 - self.reach, sx1 + self.reach]))
             rows = slice(*np.searchsorted(ys, [sy0 - self.reach, sy1 + self.reach]))
-            window = clearance[rows, cols]
-            np.minimum(window, shape.distance(x[rows, cols], y[rows, cols]), out=window)
-        self.clearance = clearance
-        self.obstacles = shapely.union_all([s.polygon() for s in self.shapes])
+            x, y = np.meshgrid(xs[cols], ys[rows])
+            window = self.clearance[rows, cols]
+            np.minimum(window, shape.distance(x, y), out=window)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -176,7 +205,8 @@ class GridPlanner:
     def segments_clear(self, a: np.ndarray, ends: np.ndarray, radius: float) -> np.ndarray:
         """(K,) bool, whether each segment from ``a`` (2,) to ``ends`` (K, 2) keeps clear."""
         lines = shapely.linestrings(np.stack([np.broadcast_to(a, ends.shape), ends], axis=1))
-        return ~shapely.intersects(self._inflated(radius), lines)
+        clear = ~shapely.intersects(self._inflated(radius), lines)
+        return clear if self._base is None else clear & self._base.segments_clear(a, ends, radius)
 
     def smooth(self, points: np.ndarray, radius: float) -> np.ndarray:
         """(M, 2) the grid path shortcut greedily: from each kept point to the farthest visible."""
@@ -189,7 +219,8 @@ class GridPlanner:
         return points[kept]
 
     def _inflated(self, radius: float) -> BaseGeometry:
-        """The obstacles grown by ``radius + CLEARANCE_MARGIN``, prepared (cached per radius).
+        """The obstacles this planner adds grown by ``radius + CLEARANCE_MARGIN``, prepared
+        (cached per radius).
 
         A segment clear of it keeps the clearance: a prepared intersection test
         is far cheaper than a distance to every nearby obstacle. The buffer's arcs
