@@ -26,13 +26,13 @@ import numpy as np
 from tqdm import tqdm
 
 from bench.report import C, config_from_args, cost_ratio, delay_ratio, fmt, nanmean
-from service.core.cliques import Cliques, find_cliques
+from service.core.cliques import Cliques, TooManyCliques, clique_budget, find_cliques
 from service.core.evaluate import Evaluator
 from service.core.path_schemas import PathsRequest
 from service.core.problem import Problem, ProblemError, problem_from_request
 from service.core.schemas import Objective, ScheduleRequest, ScheduleResponse
 from service.geometry.graph import GeometrySettings
-from service.motion.plan import derive
+from service.motion.plan import SERVICE_BOUND, derive
 from service.scenarios import generate
 from service.settings import Settings
 from service.solvers.dispatch import DispatchPolicy, solve_problem
@@ -91,12 +91,17 @@ def case_of(
     ref_cost: float | None = None,
     ref_runtime_s: float | None = None,
 ) -> Case:
-    """Validate ``request`` the way the service does and build what every solve reuses."""
+    """Validate ``request`` the way the service does and build what every solve reuses.
+
+    Raises:
+        ProblemError: the service would answer 422.
+        TooManyCliques: its cliques exceed the service's default work bound (413).
+    """
     problem = problem_from_request(request)
     free = Evaluator(problem).free_costs()[request.objective]
-    return Case(
-        family, name, request, problem, find_cliques(problem), free, ref_cost, ref_runtime_s
-    )
+    with clique_budget(SERVICE_BOUND):
+        cliques = find_cliques(problem)
+    return Case(family, name, request, problem, cliques, free, ref_cost, ref_runtime_s)
 
 
 def conformance_cases(
@@ -153,7 +158,9 @@ def world_case(
     base_seed: int = 0,
     objective: Objective = "avg_completion",
 ) -> Case | None:
-    """The ``index``-th derivable world of ``kind`` and size (None if WORLD_TRIES seeds fail).
+    """The ``index``-th world of ``kind`` and size that the service serves (None if
+    WORLD_TRIES seeds fail: paths refused with 422, cliques over the service's default
+    work bound, 413, or no two robots interfering).
 
     Derivations (seconds at 250 robots) are cached, one file per world, under ``cache``.
     """
@@ -167,7 +174,10 @@ def world_case(
             path.write_text(json.dumps(data))
         if "request" in data:
             request = ScheduleRequest.model_validate(data["request"])
-            return case_of(f"{kind} {robots}", f"{kind}/{robots}/{seed}", request)
+            try:
+                return case_of(f"{kind} {robots}", f"{kind}/{robots}/{seed}", request)
+            except TooManyCliques:
+                continue
     return None
 
 

@@ -160,7 +160,7 @@ def derive_worlds(cfg: Config, progress: bool) -> tuple[list[World], list[dict[s
     worlds, skipped = [], []
     for kind, robots, index in tqdm(jobs, desc="worlds", unit="world", disable=not progress):
         first = cfg.base_seed + index * WORLD_TRIES
-        reason = f"seeds {first}-{first + WORLD_TRIES - 1} refused (422) or conflict-free"
+        reason = f"seeds {first}-{first + WORLD_TRIES - 1} refused (422, 413) or conflict-free"
         try:
             case = world_case(kind, robots, index, cfg.cache, cfg.base_seed, cfg.objective)
         except TooManyCliques as exc:  # the service's 413; the next seeds are not tried

@@ -19,11 +19,14 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from service.core.schemas import MAX_TIME_LIMIT_S
 
-__all__ = ["MIB", "Settings", "get_settings"]
+__all__ = ["MAX_CLIQUES", "MAX_CLIQUE_INCIDENCES", "MIB", "Settings", "get_settings"]
 
 MIB = 1024 * 1024
 
 # The model store shipped in the repository (the Dockerfile copies it to the same place).
+# The defaults of ``max_cliques`` and ``max_clique_incidences`` (see Settings), also what
+# tools that ask whether a default service would serve a request (413) read.
+MAX_CLIQUES, MAX_CLIQUE_INCIDENCES = 20_000, 2_000_000
 DEFAULT_MODEL_STORE = Path(__file__).resolve().parents[1] / "model_store"
 
 LogLevel = Literal["critical", "error", "warning", "info", "debug"]
@@ -108,8 +111,8 @@ class Settings(BaseSettings):
     # warehouses hold up to 936,000 conflicts in 209 cliques and keep their limits, and a
     # sparse graph has about one conflict per clique (5,000 robots, 100,000 conflicts:
     # 102,512 in as many cliques).
-    max_cliques: int = Field(default=20_000, ge=1)
-    max_clique_incidences: int = Field(default=2_000_000, ge=1)
+    max_cliques: int = Field(default=MAX_CLIQUES, ge=1)
+    max_clique_incidences: int = Field(default=MAX_CLIQUE_INCIDENCES, ge=1)
     # Paths form (docs/paths.md): pieces of at most this many metres (sections and following
     # gaps are conservative by up to this much) and this much clearance kept between
     # footprints beyond their radii; caps on path points (413 above them) and on the

@@ -18,7 +18,12 @@ from typing import Any
 
 import numpy as np
 
-from service.core.cliques import TooManyCliques, find_cliques
+from service.core.cliques import (
+    CliqueBound,
+    TooManyCliques,
+    clique_budget,
+    find_cliques,
+)
 from service.core.path_schemas import (
     CoordinationGraphResponse,
     MotionChecksOut,
@@ -44,6 +49,7 @@ from service.motion.progress import progress_at, state_of
 from service.motion.reserve import MotionReserve, work_units
 from service.motion.trajectories import departure_times, realized_costs, trajectories
 from service.scenarios.world import World
+from service.settings import MAX_CLIQUE_INCIDENCES, MAX_CLIQUES
 from service.simulation.clearance import Clearance, Trajectory, check_clearance
 from service.simulation.executor import (
     DependencyPlan,
@@ -56,13 +62,21 @@ from service.simulation.executor import (
 from service.simulation.simulate import plan_to_wire
 from service.solvers.dispatch import DispatchPolicy, InvalidAnswerError, dispatch_problem
 
-__all__ = ["MOTION_RESERVE", "coordination_graph", "derived_request", "plan_paths"]
+__all__ = [
+    "MOTION_RESERVE",
+    "SERVICE_BOUND",
+    "coordination_graph",
+    "derived_request",
+    "plan_paths",
+]
 
 log = logging.getLogger(__name__)
 
 # The time kept after the solve for execution, the clearance check and the answer, learned
 # from this process's answers (service/motion/reserve.py); at least MIN_SOLVE_S to solve.
 MOTION_RESERVE = MotionReserve()
+# The clique work bound of a service with the default settings: above it, 413.
+SERVICE_BOUND = CliqueBound(MAX_CLIQUES, MAX_CLIQUE_INCIDENCES)
 MIN_SOLVE_S = 0.05
 
 
@@ -86,16 +100,18 @@ def derive(request: PathsRequest, geometry: GeometrySettings) -> CoordinationGra
     return build_graph([RobotPath.from_wire(r) for r in request.robots], geometry)
 
 
-def derived_request(world: World) -> ScheduleRequest | None:
-    """The graph-form request of ``world``, as the service derives it; None when the
-    service would refuse the world or no two of its robots interfere."""
+def derived_request(world: World, bound: CliqueBound = SERVICE_BOUND) -> ScheduleRequest | None:
+    """The graph-form request of ``world``, as the service derives it; None when a
+    service of clique work bound ``bound`` would refuse the world (422, 413) or no two of
+    its robots interfere."""
     paths = PathsRequest.model_validate(world.to_request())
     try:
         request = derive(paths, GeometrySettings()).to_request(paths)
         if request is None:
             return None
         problem = problem_from_request(request)
-        find_cliques(problem)  # raises where the service answers 413
+        with clique_budget(bound):
+            find_cliques(problem)  # raises where the service answers 413
     except (ProblemError, TooManyCliques):
         return None
     return request if problem.n_conflicts else None
