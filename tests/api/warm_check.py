@@ -27,9 +27,9 @@ def main() -> int:
     if not runtime.ready:
         print(json.dumps({"not ready": runtime.detail}))
         return 1
+    worlds = [generate(*world) for world in WORLDS]  # the generator's kernels: no request's
     before = compiled_signatures()
-    for kind, robots, seed in WORLDS:
-        world = generate(kind, robots, seed)
+    for world in worlds:
         solve_every_way(derived_request(world), runtime.policy, 0.2)
         paths = PathsRequest.model_validate(world.to_request())
         plan_paths(paths, runtime.policy, GeometrySettings())
