@@ -28,11 +28,9 @@ from tqdm import tqdm
 from bench.report import C, config_from_args, cost_ratio, delay_ratio, fmt, nanmean
 from service.core.cliques import Cliques, TooManyCliques, clique_budget, find_cliques
 from service.core.evaluate import Evaluator
-from service.core.path_schemas import PathsRequest
 from service.core.problem import Problem, ProblemError, problem_from_request
 from service.core.schemas import Objective, ScheduleRequest, ScheduleResponse
-from service.geometry.graph import GeometrySettings
-from service.motion.plan import SERVICE_BOUND, derive
+from service.motion.plan import SERVICE_BOUND, world_request
 from service.scenarios import generate
 from service.settings import Settings
 from service.solvers.dispatch import DispatchPolicy, solve_problem
@@ -139,10 +137,8 @@ def _posed_name(name: str, own: str, objective: str) -> str:
 
 def _derived(kind: str, robots: int, seed: int, objective: str) -> dict[str, Any]:
     """A world's graph-form request (JSON), or the 422 message when its paths are refused."""
-    world = generate(kind, robots, seed)
-    paths = PathsRequest.model_validate(world.to_request(objective))
     try:
-        request = derive(paths, GeometrySettings()).to_request(paths)
+        request = world_request(generate(kind, robots, seed), objective)
     except ProblemError as exc:
         return {"refused": str(exc)}
     if request is None:

@@ -68,6 +68,7 @@ __all__ = [
     "coordination_graph",
     "derived_request",
     "plan_paths",
+    "world_request",
 ]
 
 log = logging.getLogger(__name__)
@@ -100,13 +101,23 @@ def derive(request: PathsRequest, geometry: GeometrySettings) -> CoordinationGra
     return build_graph([RobotPath.from_wire(r) for r in request.robots], geometry)
 
 
+def world_request(world: World, objective: str = "avg_completion") -> ScheduleRequest | None:
+    """The graph-form request the service derives from ``world``'s paths for ``objective``
+    (None: no two robots interfere).
+
+    Raises:
+        ProblemError: the service refuses the paths (422).
+    """
+    paths = PathsRequest.model_validate(world.to_request(objective))
+    return derive(paths, GeometrySettings()).to_request(paths)
+
+
 def derived_request(world: World, bound: CliqueBound = SERVICE_BOUND) -> ScheduleRequest | None:
     """The graph-form request of ``world``, as the service derives it; None when a
     service of clique work bound ``bound`` would refuse the world (422, 413) or no two of
     its robots interfere."""
-    paths = PathsRequest.model_validate(world.to_request())
     try:
-        request = derive(paths, GeometrySettings()).to_request(paths)
+        request = world_request(world)
         if request is None:
             return None
         problem = problem_from_request(request)
