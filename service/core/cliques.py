@@ -4,7 +4,10 @@ The contract limits crowding per clique of the conflict graph: for every
 maximal clique K, rho_K = min density of its nodes and at most
 h_K = rho_K (rho_K + 1) / 2 - 1 of the conflicts inside K may be following-type;
 each explicit ``density_limits`` entry adds the same kind of clique with
-rho = its ``max_robots``. Only cliques with at least one conflict matter.
+rho = its ``max_robots``. Only maximal cliques of more members than their least density
+are listed: a clique of k <= rho_K members holds k (k - 1) / 2 <= h_K conflicts, so no
+assignment can exceed its budget (those that can are exactly the ones whose budget
+binds, :meth:`Cliques.binding`, or is zero, :meth:`Cliques.forbidden`).
 
 Maximal cliques can be exponentially many (a complete multipartite conflict
 graph of k robots with n nodes each has n^k), so the enumeration stops with
@@ -190,13 +193,14 @@ def _count_following(following: np.ndarray, edge: np.ndarray, start: np.ndarray)
 
 
 def find_cliques(problem: Problem) -> Cliques:
-    """Maximal cliques of the conflict graph plus explicit limits, with budgets.
+    """Maximal cliques of the conflict graph of more members than their least density
+    (the others can never bind) plus explicit limits, with budgets.
 
-    Raises:
-        TooManyCliques: the cliques exceed the budget of :func:`clique_budget`.
+        Raises:
+            TooManyCliques: the cliques exceed the budget of :func:`clique_budget`.
     """
     adjacency = _adjacency(problem)
-    members, member_start = _conflict_cliques(adjacency, _BOUND.get())
+    members, member_start = _conflict_cliques(adjacency, problem.node_density, _BOUND.get())
     first = member_start[:-1]  # (Q,) every clique has two or more members
     rho = np.minimum.reduceat(problem.node_density[members], first) if first.size else first
     limits = problem.density_limits
@@ -237,9 +241,12 @@ def _adjacency(problem: Problem) -> _Adjacency:
     return _Adjacency(start.astype(np.int64), b[order].astype(np.int64), conflict)
 
 
-def _conflict_cliques(adjacency: _Adjacency, bound: CliqueBound) -> tuple[np.ndarray, np.ndarray]:
-    """Every maximal clique of the conflict graph, members ascending, cliques in
-    lexicographic order of their members (whatever the enumeration's order).
+def _conflict_cliques(
+    adjacency: _Adjacency, density: np.ndarray, bound: CliqueBound
+) -> tuple[np.ndarray, np.ndarray]:
+    """Every maximal clique of the conflict graph that holds more members than its least
+    ``density`` (V,), members ascending, cliques in lexicographic order of their members
+    (whatever the enumeration's order).
 
     Shapes: -> members (K,) int, member_start (Q+1,) int: clique q is
     ``members[member_start[q]:member_start[q + 1]]``.
@@ -251,7 +258,9 @@ def _conflict_cliques(adjacency: _Adjacency, bound: CliqueBound) -> tuple[np.nda
     limits = np.array(
         [-1 if b is None else b for b in (bound.incidences, bound.cliques)], dtype=np.int64
     )
-    flat, ends, status = _maximal_cliques(adjacency.start, adjacency.neighbours, limits)
+    flat, ends, status = _maximal_cliques(
+        adjacency.start, adjacency.neighbours, density.astype(np.int64), limits
+    )
     if status == _OVER_INCIDENCES:
         assert bound.incidences is not None
         raise TooManyCliques("max_clique_incidences", bound.incidences)
@@ -318,13 +327,19 @@ def _precedes(values: np.ndarray, bounds: np.ndarray, p: int, q: int) -> bool:
 
 @numba.njit(cache=True, nogil=True)
 def _maximal_cliques(
-    start: np.ndarray, neighbours: np.ndarray, limits: np.ndarray
+    start: np.ndarray, neighbours: np.ndarray, density: np.ndarray, limits: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, int]:
-    """Maximal cliques of two or more vertices of a graph in CSR form (vertex v's sorted
-    neighbours are ``neighbours[start[v]:start[v + 1]]``): their members (flat), the end
-    of each clique in them, and a status: _COMPLETE, or _OVER_INCIDENCES / _OVER_CLIQUES
-    when they hold more than ``limits[0]`` vertex pairs or are more than ``limits[1]``
-    cliques (the enumeration stops there; a limit of -1: none).
+    """Maximal cliques of a graph in CSR form (vertex v's sorted neighbours are
+    ``neighbours[start[v]:start[v + 1]]``) that hold more vertices than the least
+    ``density`` (V,) among them: their members (flat), the end of each clique in them,
+    and a status: _COMPLETE, or _OVER_INCIDENCES / _OVER_CLIQUES when they hold more
+    than ``limits[0]`` vertex pairs or are more than ``limits[1]`` cliques (the
+    enumeration stops there; a limit of -1: none).
+
+    The others are never listed: their budget is at least their conflicts (see
+    :func:`budget_for`), so no assignment can exceed it, and on graphs of dense nodes
+    they are nearly all (a 250-robot floor of density 50 nodes: 390,050 maximal cliques
+    holding 101 million conflicts, not one of them able to bind).
 
     Each vertex v, in degeneracy order, starts the cliques whose earliest vertex it is:
     candidates are its later neighbours, excluded its earlier ones, and its
@@ -341,7 +356,7 @@ def _maximal_cliques(
     for v in np.argsort(rank):
         universe = neighbours[start[v] : start[v + 1]]  # (d,) v's neighbours
         d = universe.size
-        if d == 0:
+        if d == 0 or not _root_may_bind(v, universe, rank, density):
             continue
         words = (d + 63) // 64
         for k in range(d):
@@ -356,13 +371,28 @@ def _maximal_cliques(
         for k in range(d):
             if rank[universe[k]] > rank[v]:
                 later[k // 64] |= np.uint64(1) << np.uint64(k % 64)
-        status = _cliques_through(v, later, adj, universe, sink, limits)
+        status = _cliques_through(v, later, adj, universe, density, sink, limits)
         for k in range(d):
             local[universe[k]] = -1
         if status != _COMPLETE:
             break
     # Typed lists read element by element from Python (0.75 s for 177,000 members).
     return _array(members), _array(ends), status
+
+
+@numba.njit(cache=True, nogil=True)
+def _root_may_bind(v: int, universe: np.ndarray, rank: np.ndarray, density: np.ndarray) -> bool:
+    """Whether v and its later neighbours could hold a clique of more vertices than its
+    least density: some of them is less dense than all of them together."""
+    size = 1
+    for u in universe:
+        size += rank[u] > rank[v]
+    if density[v] < size:
+        return True
+    for u in universe:  # noqa: SIM110 (a loop compiles; any() of a generator does not)
+        if rank[u] > rank[v] and density[u] < size:
+            return True
+    return False
 
 
 @numba.njit(cache=True, nogil=True)
@@ -380,20 +410,23 @@ def _cliques_through(
     later: np.ndarray,
     adj: np.ndarray,
     universe: np.ndarray,
+    density: np.ndarray,
     sink: tuple[List, List, np.ndarray],
     limits: np.ndarray,
 ) -> int:
-    """The maximal cliques holding v and, otherwise, only v's ``later`` neighbours:
-    Bron-Kerbosch with Tomita's pivot, iterative (an explicit stack of candidate,
-    excluded and still-to-try bitsets per depth). Shapes: later (W,), adj (d, W) over
-    the d neighbours ``universe``. The status of :func:`_report` once a limit is
-    exceeded, else _COMPLETE."""
+    """The maximal cliques holding v and, otherwise, only v's ``later`` neighbours, of
+    more members than their least ``density`` (V,): Bron-Kerbosch with Tomita's pivot,
+    iterative (an explicit stack of candidate, excluded and still-to-try bitsets per
+    depth), not descending where no such clique can lie (:func:`_may_bind`). Shapes:
+    later (W,), adj (d, W) over the d neighbours ``universe``. The status of
+    :func:`_report` once a limit is exceeded, else _COMPLETE."""
     d, words = adj.shape
     cand = np.zeros((d + 1, words), dtype=np.uint64)
     excl = np.zeros((d + 1, words), dtype=np.uint64)
     todo = np.zeros((d + 1, words), dtype=np.uint64)
     chosen = np.full(d + 1, -1, dtype=np.int64)  # the vertex being tried at each depth
     clique = np.empty(d + 1, dtype=np.int64)  # universe indices; v itself is implied
+    least = np.empty(d + 1, dtype=np.int64)  # least density of v and clique[:level + 1]
     cand[0] = later
     excl[0] = ~later & _all_bits(d, words)
     if not later.any():  # v's cliques all hold an earlier vertex: found from there
@@ -414,18 +447,44 @@ def _cliques_through(
         todo[level, u // 64] &= ~(np.uint64(1) << np.uint64(u % 64))
         chosen[level] = u
         clique[level] = u
+        above = density[v] if level == 0 else least[level - 1]
+        least[level] = min(above, density[universe[u]])
         next_cand = cand[level] & adj[u]
         next_excl = excl[level] & adj[u]
         if not next_cand.any():
-            if not next_excl.any():  # maximal
+            if not next_excl.any() and least[level] < level + 2:  # maximal, may bind
                 status = _report(v, clique, level + 1, universe, sink, limits)
                 if status != _COMPLETE:
                     return status
+            continue
+        if not _may_bind(least[level], level + 2, next_cand, universe, density):
             continue
         level += 1
         cand[level], excl[level] = next_cand, next_excl
         todo[level] = next_cand & ~adj[_pivot(next_cand, next_excl, adj)]
     return _COMPLETE
+
+
+@numba.njit(cache=True, nogil=True)
+def _may_bind(
+    least: int, size: int, cand: np.ndarray, universe: np.ndarray, density: np.ndarray
+) -> bool:
+    """Whether a clique of ``size`` members of least density ``least``, grown from the
+    candidates ``cand`` (W,) over ``universe``, could hold more members than its least
+    density: some member or candidate is less dense than all of them together."""
+    total = size
+    for w in range(cand.size):
+        total += _popcount(cand[w])
+    if least < total:
+        return True
+    for w in range(cand.size):
+        pool = cand[w]
+        while pool:
+            low = pool & (~pool + np.uint64(1))
+            if density[universe[w * 64 + _bit_index(low)]] < total:
+                return True
+            pool ^= low
+    return False
 
 
 @numba.njit(cache=True, nogil=True)
