@@ -1,10 +1,12 @@
 """Scenario worlds as graph-form requests, for tests that need the congestion real paths make
-(random and stitched graphs rarely have it): derived as the service derives them."""
+(random and stitched graphs rarely have it): derived as the service derives them, or, where
+a test needs density budgets that bind, as the service derived them before session 57."""
 
 from __future__ import annotations
 
 import json
 from functools import cache
+from pathlib import Path
 from typing import Any
 
 from service.core.path_schemas import PathsRequest
@@ -28,3 +30,15 @@ def world_request(kind: str, robots: int, seed: int) -> dict[str, Any]:
     in its corridors: 252 conflicts.
     """
     return json.loads(_derived(kind, robots, seed))
+
+
+CONGESTED_WAREHOUSE = Path(__file__).resolve().parent / "data" / "congested_warehouse.json"
+
+
+def congested_warehouse() -> dict[str, Any]:
+    """``wh_two_way``/25/60 as the service derived it until session 57 (252 conflicts):
+    each node held as many robots as fit nose to tail along it, so its density cliques
+    bind (which the service's derivation no longer makes: every node holds the fleet) and
+    the choice of types matters, as it does on a graph-form client's graph with such
+    densities."""
+    return json.loads(CONGESTED_WAREHOUSE.read_text())

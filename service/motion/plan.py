@@ -18,12 +18,6 @@ from typing import Any
 
 import numpy as np
 
-from service.core.cliques import (
-    CliqueBound,
-    TooManyCliques,
-    clique_budget,
-    find_cliques,
-)
 from service.core.path_schemas import (
     CoordinationGraphResponse,
     MotionChecksOut,
@@ -32,7 +26,7 @@ from service.core.path_schemas import (
     TimingsOut,
     TrajectoryOut,
 )
-from service.core.problem import ProblemError, problem_from_request
+from service.core.problem import ProblemError
 from service.core.schemas import (
     AssignmentOut,
     CostsOut,
@@ -49,7 +43,6 @@ from service.motion.progress import progress_at, state_of
 from service.motion.reserve import MotionReserve, work_units
 from service.motion.trajectories import departure_times, realized_costs, trajectories
 from service.scenarios.world import World
-from service.settings import MAX_CLIQUE_INCIDENCES, MAX_CLIQUES
 from service.simulation.clearance import Clearance, Trajectory, check_clearance
 from service.simulation.executor import (
     DependencyPlan,
@@ -64,7 +57,6 @@ from service.solvers.dispatch import DispatchPolicy, InvalidAnswerError, dispatc
 
 __all__ = [
     "MOTION_RESERVE",
-    "SERVICE_BOUND",
     "coordination_graph",
     "derived_request",
     "plan_paths",
@@ -76,8 +68,6 @@ log = logging.getLogger(__name__)
 # The time kept after the solve for execution, the clearance check and the answer, learned
 # from this process's answers (service/motion/reserve.py); at least MIN_SOLVE_S to solve.
 MOTION_RESERVE = MotionReserve()
-# The clique work bound of a service with the default settings: above it, 413.
-SERVICE_BOUND = CliqueBound(MAX_CLIQUES, MAX_CLIQUE_INCIDENCES)
 MIN_SOLVE_S = 0.05
 
 
@@ -112,20 +102,15 @@ def world_request(world: World, objective: str = "avg_completion") -> ScheduleRe
     return derive(paths, GeometrySettings()).to_request(paths)
 
 
-def derived_request(world: World, bound: CliqueBound = SERVICE_BOUND) -> ScheduleRequest | None:
-    """The graph-form request of ``world``, as the service derives it; None when a
-    service of clique work bound ``bound`` would refuse the world (422, 413) or no two of
-    its robots interfere."""
+def derived_request(world: World) -> ScheduleRequest | None:
+    """The graph-form request of ``world``, as the service derives it; None when the
+    service would refuse the world (422) or no two of its robots interfere. (Never 413:
+    a derived graph's density cliques are its exclusive-only conflicts' own limits, which
+    the clique work bound does not count; see service/geometry/graph.py.)"""
     try:
-        request = world_request(world)
-        if request is None:
-            return None
-        problem = problem_from_request(request)
-        with clique_budget(bound):
-            find_cliques(problem)  # raises where the service answers 413
-    except (ProblemError, TooManyCliques):
+        return world_request(world)
+    except ProblemError:
         return None
-    return request if problem.n_conflicts else None
 
 
 def coordination_graph(

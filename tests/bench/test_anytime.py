@@ -9,7 +9,6 @@ from pathlib import Path
 import pytest
 
 import bench.anytime as anytime
-from bench import cases
 from bench.anytime import (
     QUICK,
     Config,
@@ -23,7 +22,6 @@ from bench.anytime import (
 )
 from bench.cases import conformance_cases, measured, world_case
 from bench.report import JsonCache, config_from_args
-from service.core.cliques import CliqueBound
 from service.solvers.exact import solve
 from service.solvers.registry import SolveContext
 
@@ -171,15 +169,6 @@ def test_worlds_are_derived_once_and_cached(tmp_path: Path) -> None:
     again = world_case("wh_two_lane", 10, 0, tmp_path)
     assert again is not None and again.request == case.request
     assert json.loads(cached.read_text())["request"]["objective"] == "avg_completion"
-
-
-def test_worlds_the_service_would_refuse_with_413_are_skipped(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    served = world_case("wh_two_lane", 10, 0, tmp_path)
-    assert served is not None and served.problem.n_conflicts > 0  # so it has a clique
-    monkeypatch.setattr(cases, "SERVICE_BOUND", CliqueBound(cliques=0))  # every world: 413
-    assert world_case("wh_two_lane", 10, 0, tmp_path) is None  # cached, yet refused
 
 
 def test_quick_run_writes_everything(tmp_path: Path) -> None:

@@ -25,7 +25,7 @@ from service.core.retype import descend_types, refit_types, updated_pair_times
 from service.core.schemas import OBJECTIVES, ScheduleRequest
 from service.learning.generate import stitched_problem
 from service.solvers.fcfs import fcfs_priorities
-from tests.worlds import world_request
+from tests.worlds import congested_warehouse
 
 
 @cache
@@ -81,7 +81,7 @@ def test_refitted_types_keep_the_directions_and_never_cost_more(
 def _warehouse() -> tuple[Problem, Decoder, Evaluator]:
     """A congested two-way warehouse of 25 robots: waits there move the pair times far
     from the planned ones."""
-    request = ScheduleRequest.model_validate(world_request("wh_two_way", 25, 60))
+    request = ScheduleRequest.model_validate(congested_warehouse())
     problem = problem_from_request(request)
     return problem, Decoder(problem, find_cliques(problem)), Evaluator(problem)
 

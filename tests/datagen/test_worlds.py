@@ -7,13 +7,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from service.core.cliques import CliqueBound
 from service.core.problem import problem_from_request
 from service.core.schemas import ScheduleRequest
 from service.datagen import worlds
 from service.datagen.config import ScenarioConfig
 from service.datagen.worlds import draw_world, robot_count
-from service.motion.plan import derived_request
 from service.scenarios import KINDS, World, generate
 
 
@@ -75,12 +73,6 @@ def test_refused_worlds_are_redrawn_and_counted(monkeypatch: pytest.MonkeyPatch)
     calls.clear()
     with pytest.raises(RuntimeError, match="no usable world"):
         draw_world(ScenarioConfig(cfg.kinds, cfg.robots, max_redraws=2), 0)
-
-
-def test_a_world_whose_cliques_exceed_the_services_bound_is_not_derived() -> None:
-    world = generate("wh_two_lane", 10, 0)
-    assert derived_request(world) is not None  # the service's default bound
-    assert derived_request(world, CliqueBound(cliques=0)) is None  # it would answer 413
 
 
 def test_unknown_kinds_and_empty_ranges_are_refused() -> None:

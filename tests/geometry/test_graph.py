@@ -15,6 +15,7 @@ import pytest
 from hypothesis import given, settings
 from pydantic import ValidationError
 
+from service.core.cliques import find_cliques
 from service.core.path_schemas import MAX_ROBOT_ID_LENGTH, PathsRequest
 from service.core.problem import ProblemError, problem_from_request
 from service.core.schemas import MAX_ID_LENGTH, ScheduleRequest
@@ -66,11 +67,20 @@ def assert_graph_sound(req: PathsRequest, graph: CoordinationGraph) -> ScheduleR
     if wire is None:
         assert robot_of.size == 0
         return None
-    for m, allowed in enumerate(following_alone_allowed(wire)):
+    alone = following_alone_allowed(wire)
+    assert alone == graph.conf_may_follow.tolist()
+    for m, allowed in enumerate(alone):
         cos = np.concatenate(_box_cosines(graph, m))
         if allowed:  # crossings and head-on sections are exclusive
             assert np.any(cos > np.cos(np.radians(30))), f"crossing conflict {m} may follow"
             assert not np.any(cos < -np.cos(np.radians(30))), f"head-on conflict {m} may follow"
+    # The density rules forbid following there and nowhere else: all the others at once.
+    ref = reference_problem(wire.model_dump(mode="json", exclude_none=True))
+    assert density_ok(density_groups(ref), alone)
+    # No maximal clique can bind, so none is listed (none counts against the service's
+    # clique work bound: a paths request is never refused with 413 for its cliques).
+    cliques = find_cliques(problem_from_request(wire))
+    assert cliques.budget.size == len(wire.density_limits) == int(np.sum(~np.array(alone)))
     assert_wire_is_the_graph(graph, wire)
     problem_from_request(wire)  # the contract's cross-field rules accept it
     ScheduleRequest.model_validate(wire.model_dump(mode="json"))  # and so does the wire
@@ -288,7 +298,7 @@ def test_crossing_robots_form_one_exclusive_conflict() -> None:
     wire = assert_graph_sound(req, graph)
     assert wire is not None
     assert graph.n_conflicts == 1 and graph.node_robot.tolist() == [0, 1]
-    assert graph.node_density.tolist() == [1, 1]
+    assert graph.node_density.tolist() == [2, 2] and graph.exclusive_pairs() == [(0, 1)]
     assert graph.forced.tolist() == [0]
     # Both sections are centred on the crossing and span at least the two radii + margin.
     (x0, x1), (y0, y1) = graph.node_span.tolist()
@@ -317,7 +327,7 @@ def test_following_only_for_co_directional_sections() -> None:
     req, opposite = _graph([robot("a", LANE_A), robot("b", LANE_B[::-1])])
     wire = assert_graph_sound(req, opposite)
     assert wire is not None and following_alone_allowed(wire) == [False]
-    assert opposite.node_density.tolist() == [1, 1]
+    assert opposite.node_density.tolist() == [2, 2] and opposite.exclusive_pairs() == [(0, 1)]
     req, mixed = _graph([robot("a", LANE_A), robot("b", LANE_B), robot("c", [[5, -5], [5, 5]])])
     wire = assert_graph_sound(req, mixed)
     assert wire is not None and mixed.n_conflicts == 3

@@ -19,7 +19,7 @@ from service.learning.store import load_all
 from service.solvers import gnn_vae as gnn
 from service.solvers.registry import SolveContext
 from tests.solvers.common import context, cost
-from tests.worlds import world_request
+from tests.worlds import congested_warehouse
 
 STORE = Path(__file__).resolve().parents[2] / "model_store"
 
@@ -116,7 +116,7 @@ def test_below_the_threshold_the_cheapest_of_draw_and_descents_answers(
 def test_types_by_descent_win_on_a_congested_warehouse(models: dict) -> None:
     """On a two-way warehouse of 25 robots (252 conflicts) the descent's types beat the
     decoder's on the best draw's directions (session 44: 48.98 -> 47.22)."""
-    request = world_request("wh_two_way", 25, 60)
+    request = congested_warehouse()
     ctx = context(request, "avg_completion", 30.0, seed=0, models=models)
     out = gnn.gnn_vae(ctx)
     decoded = gnn.sample_model(ctx, models["avg_completion"], 100, time.monotonic() + 30.0)

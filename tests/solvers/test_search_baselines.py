@@ -35,7 +35,7 @@ from service.solvers.registry import SolveContext
 from service.solvers.tabu import TabuConfig, tabu, tabu_search
 from tests.reference import feasible_assignments, fix_directions, reference_problem, tiny_request
 from tests.solvers.common import context, cost
-from tests.worlds import world_request
+from tests.worlds import congested_warehouse, world_request
 
 SOLVERS = {"tabu": tabu, "priority_tabu": priority_tabu, "bbts": bbts}
 
@@ -133,7 +133,7 @@ def test_priority_search_refits_its_types_every_refit_every_rounds() -> None:
     """On a congested warehouse, the round that refits comes out no dearer than the
     refit of the rounds before it, which is cheaper than they were: the refit runs, and
     only ever lowers the cost."""
-    ctx = context(world_request("wh_two_way", 25, 60), "avg_completion", seed=0)
+    ctx = context(congested_warehouse(), "avg_completion", seed=0)
     rounds = 20
     before, before_cost, _ = priority_search(
         ctx, 30.0, seed=0, cfg=PriorityConfig(patience=10**6, max_rounds=rounds - 1, refit_every=0)
