@@ -17,7 +17,7 @@ from service.core.assignment import Assignments
 from service.core.check import check
 from service.core.cliques import Cliques, find_cliques
 from service.core.decode import Decoder
-from service.core.evaluate import Evaluator
+from service.core.evaluate import MONOTONE_OBJECTIVES, Evaluator
 from service.core.incremental import apply_moves
 from service.core.orientation import OrientationGraph
 from service.core.problem import Problem, problem_from_request
@@ -25,6 +25,7 @@ from service.core.retype import descend_types, refit_types, updated_pair_times
 from service.core.schemas import OBJECTIVES, ScheduleRequest
 from service.learning.generate import stitched_problem
 from service.solvers.fcfs import fcfs_priorities
+from tests.reference import feasible_assignments, reference_problem, tiny_request
 from tests.worlds import congested_warehouse
 
 
@@ -276,3 +277,29 @@ def test_the_bounds_leave_the_descent_unchanged(monkeypatch: pytest.MonkeyPatch)
             )
         assert bounded[1:] == every[1:] and bounded[2] > 0
         np.testing.assert_array_equal(bounded[0].following, every[0].following)
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_types_by_descent_are_the_cheapest_types_where_no_budget_binds(seed: int) -> None:
+    """On tiny problems whose budgets cannot bind (every node holding every robot), the
+    descent's types cost what the cheapest valid types for the same directions cost, by
+    brute force over every typing, for the objectives that never fall when a delay rises."""
+    req = tiny_request(seed)
+    req["density_limits"] = [lim for lim in req.get("density_limits", []) if lim["max_robots"] < 2]
+    for robot in req["robots"]:
+        for node in robot["nodes"]:
+            node["density"] = len(req["robots"])
+    ref = reference_problem(req)
+    problem = problem_from_request(ScheduleRequest.model_validate(req))
+    cliques = find_cliques(problem)
+    assert not cliques.binding().any()
+    orientation, evaluator = OrientationGraph(problem, cliques), Evaluator(problem)
+    candidates = feasible_assignments(ref)
+    for directions in sorted({c.a_first for c in candidates})[:3]:
+        a_first = np.array(directions, dtype=bool)[None]  # (1, M)
+        for objective in MONOTONE_OBJECTIVES:
+            _, cost, _ = descend_types(
+                orientation, evaluator, objective, a_first, time.monotonic() + 60.0
+            )
+            best = min(c.costs[objective] for c in candidates if c.a_first == directions)
+            assert cost == pytest.approx(best, rel=1e-9, abs=1e-9)
