@@ -110,7 +110,8 @@ EARLY = 0.5  # a run ending before this share of its budget stopped on its own
 OVERRUN, OVERRUN_S = 1.1, 0.05
 # The 30-s references of the default generated worlds (r5: r4 of session 27 and new runs of
 # the 100- and 250-robot worlds, session 34; for avg_delay, with the MILP's proofs of the
-# sets posed for it, session 49).
+# sets posed for it, session 49; the avg_completion worlds' again in session 57, whose
+# derived graphs changed: keys are the requests' digests, so the older ones lie unused).
 RESULTS = Path(__file__).resolve().parents[1] / "docs/results/anytime"
 # Seconds the MILP backend gets to prove a conformance problem posed for another objective
 # (``--objective``): its optimum is then the reference (with avg_delay it proves all 25 of
