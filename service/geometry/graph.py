@@ -15,8 +15,8 @@
   not by counting robots: a node is a robot's merged interference along its route (at
   250 robots, about the whole route), so its cliques gather robots that meet at
   different places, and bounding their following by how many fit along one of them
-  forbade safe following (auto's answers 14-22 % dearer on 100-robot warehouses and
-  mixed floors) and made every 250-robot floor's cliques too many to serve (413).
+  forbade safe following (docs/paths.md, "Density": executed plans up to 22 % dearer)
+  and made every 250-robot floor's cliques too many to serve (413).
 * **Fixed orders**: a robot is present at its first point from its start time
   until it moves, so when that point lies in a conflict's section the robot
   parked there must pass first. Two robots parked in each other's way, or a
