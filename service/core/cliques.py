@@ -14,8 +14,9 @@ graph of k robots with n nodes each has n^k), so the enumeration stops with
 :class:`TooManyCliques` once there are more cliques, or they hold more conflicts,
 than the bound set by :func:`clique_budget`; the service sets it per request, CLIs
 leave it unbounded. What a solve costs follows both: each clique is a density
-constraint, each of its conflicts a term in it (a 250-robot warehouse holds 936,000
-conflicts in only 209 cliques and solves in time; 19,683 cliques holding 708,588 do not).
+constraint, each of its conflicts a term in it (a 250-robot warehouse as paths were derived
+until session 57 held 936,000 conflicts in only 209 cliques and solved in time; 19,683
+cliques holding 708,588 do not; graphs derived from paths now list none).
 
 The enumeration is compiled (Bron-Kerbosch with Tomita's pivot, vertices in degeneracy
 order, each neighbourhood as a bitset matrix: Eppstein, Loffler and Strash 2010);
@@ -356,9 +357,15 @@ def _maximal_cliques(
     for v in np.argsort(rank):
         universe = neighbours[start[v] : start[v + 1]]  # (d,) v's neighbours
         d = universe.size
-        if d == 0 or not _root_may_bind(v, universe, rank, density):
+        if d == 0:
             continue
         words = (d + 63) // 64
+        later = np.zeros(words, dtype=np.uint64)
+        for k in range(d):
+            if rank[universe[k]] > rank[v]:
+                later[k // 64] |= np.uint64(1) << np.uint64(k % 64)
+        if not _may_bind(density[v], 1, later, universe, density):
+            continue
         for k in range(d):
             local[universe[k]] = k
         adj = np.zeros((d, words), dtype=np.uint64)  # (d, W) bitsets
@@ -367,10 +374,6 @@ def _maximal_cliques(
             for u in neighbours[start[w] : start[w + 1]]:
                 if local[u] >= 0:
                     adj[k, local[u] // 64] |= np.uint64(1) << np.uint64(local[u] % 64)
-        later = np.zeros(words, dtype=np.uint64)
-        for k in range(d):
-            if rank[universe[k]] > rank[v]:
-                later[k // 64] |= np.uint64(1) << np.uint64(k % 64)
         status = _cliques_through(v, later, adj, universe, density, sink, limits)
         for k in range(d):
             local[universe[k]] = -1
@@ -378,21 +381,6 @@ def _maximal_cliques(
             break
     # Typed lists read element by element from Python (0.75 s for 177,000 members).
     return _array(members), _array(ends), status
-
-
-@numba.njit(cache=True, nogil=True)
-def _root_may_bind(v: int, universe: np.ndarray, rank: np.ndarray, density: np.ndarray) -> bool:
-    """Whether v and its later neighbours could hold a clique of more vertices than its
-    least density: some of them is less dense than all of them together."""
-    size = 1
-    for u in universe:
-        size += rank[u] > rank[v]
-    if density[v] < size:
-        return True
-    for u in universe:  # noqa: SIM110 (a loop compiles; any() of a generator does not)
-        if rank[u] > rank[v] and density[u] < size:
-            return True
-    return False
 
 
 @numba.njit(cache=True, nogil=True)
