@@ -137,7 +137,12 @@ TOL = 1e-9  # delays closer than this are equal
 # two at 5 s, beside two same-code controls a run, references r5): 1 s 0.01 0.8672, 0.04
 # 0.8860 against 0.8766 / 0.8794; 5 s 0.04 0.9671 against 0.9540 / 0.9632 and, again,
 # 0.9605 against 0.9537 / 0.9528 (250 robots +0.01-0.02, 100 robots even or -0.005).
-ANNEAL = 0.04
+# Since session 57's derived densities (following allowed wherever the paths allow it),
+# 0.08 with FLEET_SHARE's larger neighbourhoods (session 58, ``python -m bench.ab``, 1 s,
+# four seeds, three worlds a kind: wh_two_way, wh_two_lane 100 and 250, floor_dense 100):
+# 0.08 against 0.04 0.9111 / 0.9027 (40 cheaper, 20 dearer of 60), 0.02 0.9015 / 0.8985
+# (30 / 29), 0.16 against 0.08 0.9217 / 0.9139 (30 / 30); together with FLEET_SHARE see there.
+ANNEAL = 0.08
 # A picked robot may pass a held partner first even where that delays the partner past
 # its latest, at a price per unit of delay past it of PUSH times the incumbent's mean slope
 # (:meth:`~service.core.evaluate.Evaluator.evaluate_with_latest`: the objective's rise
@@ -189,7 +194,7 @@ ROOM_LAST_MORE = True
 # 0.8993 / 0.9028 against 0.8867 / 0.8879, but 5 s 0.9444 against 0.9589 (four seeds).
 HOT_ORDERS = 1
 # Robots re-inserted per step at first, as a share of the fleet (ReinsertConfig.robots at
-# least, so fleets below 104 robots keep ROBOTS): a step's evaluation walks the whole fleet,
+# least, so fleets of up to 40 robots keep ROBOTS): a step's evaluation walks the whole fleet,
 # its repair only the picked robots, so bigger fleets afford more robots a step. Measured
 # (session 33; ``auto`` through the dispatcher on the generated warehouses, mean cost
 # ratio on one yardstick per comparison, each beside a control in the same hour): 16
@@ -197,8 +202,22 @@ HOT_ORDERS = 1
 # 100-robot worlds in the run, 0.790 / 0.793 -> 0.802 (two-way), 0.804 -> 0.809
 # (two-lane); 5 s (two seeds, twice) 0.9147 -> 0.9378 and 0.9169 -> 0.9288; 24 robots
 # 0.7893 at 1 s. At 100 robots 16 read 0.808 against 0.825 (two-way, 1 s) and 4 robots
-# 0.783: 8 stayed there then (since session 41 6, see ROBOTS).
-FLEET_SHARE = 1 / 16
+# 0.783: 8 stayed there then (since session 41 6, see ROBOTS). Since session 57's derived
+# densities (following allowed wherever the paths allow it, so a robot's passage depends
+# on more partners) larger neighbourhoods pay (session 58, ``python -m bench.ab``, 1 s,
+# wh_two_way and wh_two_lane 250, three worlds, four seeds): 1/32 against 1/16 0.7982 /
+# 0.8223 (7 cheaper, 17 dearer of 24), 0.1 against 1/16 0.8677 / 0.8396 (17 / 7), 0.128
+# against 0.1 0.8881 / 0.8740 (14 / 10), 0.16 (40 robots, max_robots 40) against 0.1
+# 0.8871 / 0.8597 (20 / 4), 0.24 (60) against 0.16 even (0.8879 / 0.8892). Together with
+# ANNEAL 0.08 against both as before, other worlds (``--seed 600000``, two a kind, two
+# seeds): wh_two_way, wh_two_lane, wh_one_way, wh_mixed 250 0.9122 -> 0.9728 (15 cheaper, 1
+# dearer of 16), wh_two_way, wh_two_lane, wh_mixed, floor_dense 100 (16 robots a step)
+# 0.9691 -> 0.9815 (13 / 3), wh_two_way 25, wh_two_lane, floor_dense, floor_sparse 50 (6-8
+# robots) 0.9815 -> 0.9884 (9 / 4), the sets wh_50, wh_100 even; ``--seed 500000`` with
+# ROBOTS 10 too: 100 and 250 robots better in 26 of 32 runs, but floor_sparse 50 0.9911 ->
+# 0.9704 and wh_two_way 25 0.9988 -> 0.9944: ROBOTS stays. With neighbourhoods starting
+# at 0.16 of the fleet, MAX_SHARE no longer makes them grow in ``auto``.
+FLEET_SHARE = 0.16
 # Robots re-inserted per step at first, at least. Measured (session 41, ``python -m
 # bench.ab``: ``auto`` through the dispatcher, variants interleaved run by run, mean cost
 # ratio against the r5 references, runs where 6 cost less / more than 8), 6 against 8:
@@ -206,9 +225,9 @@ FLEET_SHARE = 1 / 16
 # there) 1 s, four seeds, 0.9402 / 0.9317 (16 / 8; 12 against 8: 0.9239 / 0.9342, 8 / 16),
 # 5 s, two seeds, 0.9705 / 0.9679 (7 / 5), avg_delay 1 s 0.9359 / 0.9148 (9 / 3); kinds not
 # tuned on (wh_one_way, wh_mixed, wh_parked 100) 1 s 0.9737 / 0.9707 (9 / 9). Fleets of
-# 104 robots and more take FLEET_SHARE.
+# 41 robots and more take FLEET_SHARE (104 and more until session 58).
 ROBOTS = 6
-# Neighbourhoods grow on a stall up to this share of the fleet (and max_robots, 32). While
+# Neighbourhoods grow on a stall up to this share of the fleet (and max_robots). While
 # annealing is hot nearly every step counts as a stall (a dearer repair kept improves on no
 # best), so every turn's neighbourhoods soon reached 32 robots: a third of a 100-robot fleet,
 # whose greedy repairs are rough and slow. Measured (session 47, ``python -m bench.ab``,
@@ -263,7 +282,7 @@ class ReinsertConfig:
     # below where they start), as in LNS. See MAX_SHARE.
     stall_cover: float = 1.0
     growth: float = 1.5
-    max_robots: int = 32
+    max_robots: int = 40  # 32 until session 58 (see FLEET_SHARE)
     max_share: float = MAX_SHARE
     blocking_weight: float = 10.0  # a binding wait against 1 per shared conflict
     # Steps without improvement, each re-inserting the whole fleet (in ``orders`` random
