@@ -51,13 +51,12 @@ class Settings(BaseSettings):
     # Conflict density, not robot count, makes CP-SAT slow: measured (docs/benchmarks.md)
     # it proves 25 robots x 2 conflicts (50) in < 0.5 s but not 25 x 4 (100) in 10 s.
     exact_max_conflicts: int = Field(default=60, ge=0)
-    # ``auto`` skips its CP-SAT stage above this many conflicts and gives the first stage
-    # (then re-insertion search in turns, or tabu search) the whole budget: measured
+    # ``auto`` skips its CP-SAT stage (and LNS) above this many conflicts and gives the first
+    # stage (then re-insertion search in turns, or tabu search) the whole budget: measured
     # (docs/benchmarks.md, "Anytime auto"), CP-SAT improved no 250-robot warehouse
     # (12,000-23,000 conflicts) in 10 s, and the 70 % it took there made auto worse with
-    # 10 s than with 5 s. (Where the budget leaves it time in proportion to the conflicts
-    # per robot, LNS follows the first stage there instead: portfolio.LARGE_LNS_RULE,
-    # sessions 24 and 28.)
+    # 10 s than with 5 s. (LNS followed the first stage there from session 24 to 57; since
+    # session 58 the turns alone are better at 5, 10 and 30 s: see portfolio._staged.)
     exact_stage_max_conflicts: int = Field(default=10_000, ge=0)
     # ``auto`` runs large-neighbourhood search (CP-SAT re-planning a few robots at a time,
     # service/solvers/lns.py) instead of its whole-model CP-SAT stage from this many

@@ -28,9 +28,9 @@ comes first, improving in stages:
    From ``lns_min_conflicts`` conflicts until the deadline, instead of the next
    stage: on whole models of this size one CP-SAT worker barely moves from its
    hint; there only where MID_LNS_LEAST_S are left (with less, the turns take the
-   time), posed for avg_completion whatever the objective (LAST_LNS_POSED). Above
-   ``exact_stage_max_conflicts`` too, from smaller neighbourhoods, where the budget
-   leaves it time in proportion to the conflicts per robot (see LARGE_LNS_RULE). Below
+   time), posed for avg_completion whatever the objective (LAST_LNS_POSED); never
+   above ``exact_stage_max_conflicts``, where the turns take the budget (measured:
+   see ``_staged``). Below
    ``lns_min_conflicts``, posed for the request's objective, until it converges (a
    plateau at its largest neighbourhood), proves optimality (a step that freed every
    robot of a fleet of at most ``lns.MAX_ROBOTS``, proven by CP-SAT) or MID_LNS_SHARE
@@ -97,47 +97,8 @@ MIN_POLISH_S = 0.02
 # with 2-3x, and the first stage given that time reached 0.97 instead of 0.92 on the
 # two-lane ones; with 3 s and more it found the best answers, and still runs there.
 EXACT_TIME_PER_BUILD = 4
-# Above ``exact_stage_max_conflicts`` (the 250-robot warehouses: 11,000-23,000 conflicts)
-# LNS follows the first stage where the time left after it is at least
-# LARGE_LNS_RULE's seconds per conflict a robot has on average (each conflict
-# counted for both robots), its first neighbourhoods of LARGE_LNS_ROBOTS robots: a step
-# frees about that many conflicts per robot it re-plans (~90-180 there, ~40-80 at 100
-# robots), so it costs in proportion, and LNS needs a few dozen steps to pass priority
-# search, whose rounds slow down less with the density. Measured (session 24; auto, cost
-# ratio against the best of the runs and the 30-s references; LNS after 30 % of priority
-# search against priority search alone): two-lane warehouses of 250 robots (92-97
-# conflicts per robot) 1 s 0.90 -> 0.78 (2 seeds), 3 s 0.946 -> 0.944 (1 seed), 5 s 0.877
-# -> 0.940 (4 seeds, better on all three), 10 s 0.815 -> 0.967 (2 seeds); two-way ones
-# (165-175) 1 s 0.93 -> 0.80, 3 s 0.968 -> 0.941, 5 s 0.974 -> 0.955 (worse on all three),
-# 10 s 0.929 -> 0.964 (better on all three); at 5 s on kinds not tuned on (2 seeds) the
-# two wh_mixed worlds of 91-94 per robot 0.952 -> 0.987, the six of 166-185 (wh_one_way,
-# wh_parked, wh_mixed) 0.976 -> 0.955. So LNS from ~2.1-3.5 s left at ~95 per robot and
-# from 3.5-7 s at ~175: 0.03 s per conflict per robot (2.9 and 5.3 s; budgets of 4.1 and
-# 7.5 s), and never with less than a least time left (with 2.1 s it broke even at
-# best; sparser fleets than these were not measured). Session 26, with re-insertion and
-# priority search in turns after the first stage (through the dispatcher, three worlds per
-# family): two-lane 250 at 5 s (3.5 s left, LNS paid by the old rule) turns then LNS
-# 0.828, turns to the deadline 0.859 (two seeds); at 10 s (one seed) turns then LNS
-# 0.928 / 0.921 (two-lane / two-way), turns alone 0.937 / 0.906: even. So at least 4 s.
-# Session 28, since LNS's held robots may be delayed up to their latest (session 27): at
-# 5 s (3.5 s left) turns then LNS against turns to the deadline, through the dispatcher,
-# paired, seeds 0-1 (`/tmp/s28/paired.py`): the three two-way and three two-lane 250-robot
-# warehouses of the bench 0.8628 -> 0.8976 against r4 (better in 12 of 12 runs; two-way
-# 0.856 -> 0.884, two-lane 0.870 -> 0.911); kinds not tuned on, cost ratio turns / LNS:
-# wh_mixed (two worlds) 1.011-1.056, wh_one_way 1.003-1.034, wh_parked/250/37 1.014-1.082,
-# wh_parked/250/21 0.901-0.919 (LNS worse there, where no plan was found). At 3 s (2.1 s
-# left) on the two-lane ones 0.851 -> 0.856 (even). So LNS from 3 s left, 0.015 s per
-# conflict per robot (2.6 s at ~175): budgets from 4.3 s at 250 robots. Not for
-# avg_delay: the same six worlds at 5 s, LNS's cost 1.034x the turns' (worse in 10 of 12
-# runs); again (session 50, ``python -m bench.ab --objective avg_delay``, three worlds a
-# kind, two seeds) 0.8770 / 0.8342 (turns / LNS; 11 / 1), and, once the held robots of
-# both searches were held by their completions (``Evaluator.held_weights``; LNS's not
-# kept), 0.9554 / 0.9598 (4 / 8): even. It kept session 26's rule until session 51, when
-# its sub-problems were posed for avg_completion (LAST_LNS_POSED). (s per conflict per
-# robot, least s) left.
-LARGE_LNS_RULE = (0.015, 3.0)
 # What LNS's sub-problems minimise where LNS is the last stage (from ``lns_min_conflicts``
-# conflicts, above the cap too), for either objective (the lns module's ``posed_for``;
+# conflicts up to the cap), for either objective (the lns module's ``posed_for``;
 # below, where CP-SAT follows, the request's objective, so that LNS may prove optimality):
 # the picked robots' completions, every held robot held by its completion
 # alone; an answer is still kept only where the one evaluator finds it cheaper in the
@@ -154,9 +115,8 @@ LARGE_LNS_RULE = (0.015, 3.0)
 # for avg_delay / for avg_completion 0.9596 / 0.9756 (2 / 6). At 100 robots from session 52
 # too: see MID_LNS_LEAST_S.
 LAST_LNS_POSED: Objective = "avg_completion"
-LARGE_LNS_ROBOTS = 4
-# LNS's sub-problems keep the held robots in the incumbent's topological order up to
-# ``exact_stage_max_conflicts`` conflicts (where its neighbourhoods start at LNS_ROBOTS):
+# LNS's sub-problems keep the held robots in the incumbent's topological order (up to
+# ``exact_stage_max_conflicts`` conflicts, where LNS runs; its neighbourhoods start at LNS_ROBOTS):
 # each held node at a constant position, instead of a position variable for each held
 # node a freed conflict touches and the links the held graph makes between them
 # (``lns._Neighbourhood._order``). A restriction where the held graph leaves two of those
@@ -165,8 +125,9 @@ LARGE_LNS_ROBOTS = 4
 # optimum in 36, worse in 3, better in 1; ``auto`` at 5 s, two seeds, two worlds per kind,
 # docs/benchmarks.md "Fewer rows per LNS step"): 100-robot warehouses (2,000-3,900
 # conflicts, 8 robots a step) 0.9700 -> 0.9823, better or even in 8 of 8 runs; 250-robot
-# ones (11,000-23,000 conflicts, 4 robots) 0.9553 -> 0.9464 (two-lane and wh_mixed worse).
-LNS_HELD_IN_ORDER = True  # up to exact_stage_max_conflicts; above, never (measured worse)
+# ones (11,000-23,000 conflicts, 4 robots; LNS ran there until session 58) 0.9553 -> 0.9464
+# (two-lane and wh_mixed worse).
+LNS_HELD_IN_ORDER = True
 # Share of the time after the first stage that LNS may take, below lns_min_conflicts,
 # before the CP-SAT stage (which proves optimality where it can): LNS stops sooner when
 # it converges (a plateau at its largest neighbourhood). Measured (session 19, 25
@@ -371,13 +332,22 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
     if problem.n_conflicts == 0:
         return SolverOutput(plain_start(ctx), optimal=True, detail="no conflict")
     too_large = problem.n_conflicts > ctx.exact_stage_max_conflicts  # for CP-SAT to help
+    # No LNS above the cap: the turns take the budget. From session 24 to 57 LNS followed
+    # them there where 0.015 s per conflict a robot has and 3 s at least were left
+    # (docs/benchmarks.md, sessions 24-28, 50-51). Since session 57's derivation and
+    # session 58's larger re-insertion neighbourhoods (``reinsert.FLEET_SHARE``) the turns
+    # alone are better at every budget measured (session 58, ``python -m bench.ab``, the
+    # rule against none; wh_two_way, wh_two_lane, wh_mixed, wh_one_way of 250 robots, two
+    # worlds a kind, one seed, cost ratio with / without, runs cheaper / dearer without):
+    # 5 s 0.9637 / 0.9995 (7 / 1), other worlds (``--seed 600000``) 0.9673 / 0.9986 (6 / 2),
+    # avg_delay 0.9720 / 0.9875 (7 / 1); 10 s 0.9808 / 0.9995 (7 / 1); 30 s (one world a
+    # kind) 0.9837 / 1.0000 (4 / 0).
     uses_lns = (
         ctx.objective in LNS_OBJECTIVES
         and ctx.exact_max_conflicts < problem.n_conflicts
-        and (not too_large or _lns_pays_above_cap(ctx, deadline))
+        and not too_large
         and (  # from lns_min_conflicts to the cap, with MID_LNS_LEAST_S left at least
             problem.n_conflicts < ctx.lns_min_conflicts
-            or too_large
             or deadline - time.monotonic() >= MID_LNS_LEAST_S[ctx.objective]
         )
     )
@@ -453,12 +423,10 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
         # The MILP follows, and no LNS step frees the whole fleet (which may prove).
         patient = milp_staged(problem, ctx.objective) and not last
         patient &= problem.n_robots > LNS_MAX_ROBOTS
-        robots = LARGE_LNS_ROBOTS if too_large else LNS_ROBOTS
-        in_order = LNS_HELD_IN_ORDER and not too_large
         posed = LAST_LNS_POSED if no_cp_sat else None  # None: the request's objective
         found = lns_search(
             ctx, best.assignment, until, ctx.seed,
-            converge=not last, robots=robots, held_in_order=in_order, posed_for=posed,
+            converge=not last, robots=LNS_ROBOTS, held_in_order=LNS_HELD_IN_ORDER, posed_for=posed,
             patience_s=MILP_LNS_PATIENCE_S if patient else None,
         )  # fmt: skip
         steps = found.steps
@@ -490,18 +458,6 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
         return replace(best, optimal=False, detail=_detail(stages, verdict))
     improved, verdict = improve(ctx, best, left)
     return replace(improved, detail=_detail(stages, verdict))
-
-
-def _lns_pays_above_cap(ctx: SolveContext, deadline: float) -> bool:
-    """Whether LNS follows the first stage of a problem above ``exact_stage_max_conflicts``
-    (``deadline`` monotonic; the objective one of LNS_OBJECTIVES): where the time left
-    after the first stage is at least LARGE_LNS_RULE's seconds per conflict a robot has
-    on average, and at least its least seconds."""
-    problem = ctx.problem
-    per_conflict, least = LARGE_LNS_RULE
-    per_robot = 2 * problem.n_conflicts / problem.n_robots
-    left = (1 - FIRST_STAGE_SHARE) * (deadline - time.monotonic())
-    return left >= max(least, per_conflict * per_robot)
 
 
 def _lns_from(objective: str) -> str:
