@@ -28,7 +28,8 @@ comes first, improving in stages:
    From ``lns_min_conflicts`` conflicts until the deadline, instead of the next
    stage: on whole models of this size one CP-SAT worker barely moves from its
    hint; there only where MID_LNS_LEAST_S are left (with less, the turns take the
-   time), posed for avg_completion whatever the objective (LAST_LNS_POSED); never
+   time; for avg_completion never since session 58), posed for avg_completion
+   whatever the objective (LAST_LNS_POSED); never
    above ``exact_stage_max_conflicts``, where the turns take the budget (measured:
    see ``_staged``). Below
    ``lns_min_conflicts``, posed for the request's objective, until it converges (a
@@ -217,9 +218,19 @@ REINSERT_SHARE = 0.43
 # 1 / 5); the bench's two-way and two-lane worlds (three, two seeds) even, 0.9317 / 0.9313
 # (5 / 7); 10 s, wh_two_way, wh_two_lane, wh_one_way, wh_parked, two worlds, one seed
 # (``--seed 900000``) 0.9664 / 0.9850 (2 / 6). At 3 s it read worse (session 51: 0.9493 /
-# 0.9428, 11 / 5), so from 4 s left.
-# Seconds left at least, by objective.
-MID_LNS_LEAST_S = {"avg_completion": 2.0, "avg_delay": 4.0}
+# 0.9428, 11 / 5), so from 4 s left. For avg_completion 2 s until session 58; since then
+# (session 57's derivation, session 58's larger re-insertion neighbourhoods:
+# ``reinsert.FLEET_SHARE``) the turns to the deadline are better at 5 and 10 s (session 58,
+# ``python -m bench.ab``, the 2-s rule against none, wh_two_way, wh_two_lane, floor_dense,
+# wh_mixed of 100 robots, cost ratio with / without, runs cheaper / dearer without): 5 s,
+# the bench's worlds, one seed, 0.9871 / 0.9924 (5 / 3); other worlds (``--seed 600000``,
+# two seeds) 0.9746 / 0.9873 (9 / 7); the sets wh_50, wh_100, geo_dense_25 and the bench's
+# two-way and two-lane worlds 0.9952 / 0.9970 (3 / 4; proven 11 / 12); 10 s (``--seed
+# 600000``, one seed) 0.9875 / 0.9982 (6 / 2). By kind: two-way warehouses gain (7 / 2 at
+# 5 s), two-lane ones lose (2 / 7): LNS still pays there, unmeasured by which rule. The
+# avg_delay rule was not measured again.
+# Seconds left at least, by objective (inf: never).
+MID_LNS_LEAST_S = {"avg_completion": math.inf, "avg_delay": 4.0}
 # From MID_TURNS_MIN_CONFLICTS (and above ``exact_max_conflicts``) to below ``lns_min_conflicts``
 # (avg_completion, avg_delay; not a re-schedule), the first stage is the plans then the
 # re-insertion turns for MID_TURNS_SHARE of the time left, in place of the policy's large solver

@@ -213,6 +213,7 @@ def test_auto_uses_its_budget_when_tabu_stops_early_and_no_cp_sat_follows() -> N
         (10, "avg_completion", 0.0, False),
         (None, "avg_completion", 2.0, False),
         (None, "avg_completion", 0.5, True),
+        (None, "avg_completion", None, False),  # the shipped rule: never for avg_completion
         (None, "avg_delay", None, False),  # the shipped rule: LNS from 4 s for avg_delay
         (None, "avg_delay", math.inf, False),
     ],
@@ -225,10 +226,10 @@ def test_from_lns_min_conflicts_re_insertion_follows_the_first_stage(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     """From lns_min_conflicts conflicts (lowered to 0) re-insertion search runs in turns
-    after the first stage: to the deadline where neither LNS nor CP-SAT
-    follows (above the cap, LNS not paying; below it, a budget under MID_LNS_LEAST_S of
-    the objective), else for REINSERT_SHARE of the time left, then LNS; the answer is
-    valid, no better than the proven optimum, and comes within the budget."""
+    after the first stage: to the deadline where neither LNS nor CP-SAT follows (above
+    the cap; below it, a budget under MID_LNS_LEAST_S of the objective), else for
+    REINSERT_SHARE of the time left, then LNS; the answer is valid, no better than the
+    proven optimum, and comes within the budget."""
     import service.solvers.portfolio as portfolio
 
     untils: list[float] = []
@@ -256,7 +257,9 @@ def test_from_lns_min_conflicts_re_insertion_follows_the_first_stage(
     else:
         assert untils[0] >= start + 0.95
         assert "re-insertion search to the deadline" in answer.solver.detail
-        shipped = {"avg_completion": "LNS from 2 s", "avg_delay": "LNS from 4 s"}[objective]
+        shipped = {"avg_completion": "no LNS for avg_completion", "avg_delay": "LNS from 4 s"}[
+            objective
+        ]
         below_cap = (
             shipped
             if least_s is None
