@@ -76,7 +76,7 @@ from service.core.decompose import DECOMPOSABLE, Part, join, parts
 from service.core.retype import descend_types
 from service.core.schemas import Objective
 from service.solvers.exact import build_seconds, improve, milp_staged
-from service.solvers.lns import LNS_OBJECTIVES, LNS_ROBOTS, lns_search
+from service.solvers.lns import LNS_OBJECTIVES, lns_search
 from service.solvers.lns import MAX_ROBOTS as LNS_MAX_ROBOTS
 from service.solvers.registry import SolveContext, SolverOutput, get_solver, register
 from service.solvers.reinsert import REINSERT_OBJECTIVES, planned_start
@@ -117,7 +117,8 @@ EXACT_TIME_PER_BUILD = 4
 # too: see MID_LNS_LEAST_S.
 LAST_LNS_POSED: Objective = "avg_completion"
 # LNS's sub-problems keep the held robots in the incumbent's topological order (up to
-# ``exact_stage_max_conflicts`` conflicts, where LNS runs; its neighbourhoods start at LNS_ROBOTS):
+# ``exact_stage_max_conflicts`` conflicts, where LNS runs; its neighbourhoods start at
+# ``lns.LNS_ROBOTS``):
 # each held node at a constant position, instead of a position variable for each held
 # node a freed conflict touches and the links the held graph makes between them
 # (``lns._Neighbourhood._order``). A restriction where the held graph leaves two of those
@@ -437,7 +438,7 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
         posed = LAST_LNS_POSED if no_cp_sat else None  # None: the request's objective
         found = lns_search(
             ctx, best.assignment, until, ctx.seed,
-            converge=not last, robots=LNS_ROBOTS, held_in_order=LNS_HELD_IN_ORDER, posed_for=posed,
+            converge=not last, held_in_order=LNS_HELD_IN_ORDER, posed_for=posed,
             patience_s=MILP_LNS_PATIENCE_S if patient else None,
         )  # fmt: skip
         steps = found.steps
