@@ -13,6 +13,7 @@ raw runs into ratios; :func:`summarize` and :func:`cell` make the tables.
 from __future__ import annotations
 
 import argparse
+import functools
 import hashlib
 import json
 import sys
@@ -25,6 +26,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+import service
 from bench.report import C, config_from_args, cost_ratio, delay_ratio, fmt, nanmean
 from service.core.cliques import CliqueBound, Cliques, clique_budget, find_cliques
 from service.core.evaluate import Evaluator
@@ -43,6 +45,7 @@ __all__ = [
     "case_of",
     "cell",
     "conformance_cases",
+    "derivation_digest",
     "measured",
     "run_cli",
     "service_policy",
@@ -148,6 +151,25 @@ def _derived(kind: str, robots: int, seed: int, objective: str) -> dict[str, Any
     return {"request": request.model_dump(mode="json", by_alias=True)}
 
 
+# The packages a world's derivation reads (the scenario generator, the paths form's geometry
+# and its motion planning): cached worlds are filed under the digest of their sources, so
+# that a changed derivation derives its worlds again instead of reading the old graphs
+# (session 57's derivation changed every graph; a cache from before measured the old ones).
+DERIVATION_PACKAGES = ("scenarios", "geometry", "motion")
+
+
+@functools.cache
+def derivation_digest() -> str:
+    """A short digest of the Python sources of DERIVATION_PACKAGES (paths and contents)."""
+    root = Path(service.__file__).resolve().parent
+    digest = hashlib.sha256()
+    for package in DERIVATION_PACKAGES:
+        for source in sorted((root / package).rglob("*.py")):
+            digest.update(source.relative_to(root).as_posix().encode())
+            digest.update(source.read_bytes())
+    return digest.hexdigest()[:12]
+
+
 def world_case(
     kind: str,
     robots: int,
@@ -159,10 +181,11 @@ def world_case(
     """The ``index``-th world of ``kind`` and size that the service serves (None if
     WORLD_TRIES seeds fail: paths refused with 422 or no two robots interfering).
 
-    Derivations (seconds at 250 robots) are cached, one file per world, under ``cache``.
+    Derivations (seconds at 250 robots) are cached, one file per world, under ``cache``
+    in a folder named by :func:`derivation_digest`.
     """
     for seed in range(base_seed + index * WORLD_TRIES, base_seed + (index + 1) * WORLD_TRIES):
-        path = cache / "worlds" / f"{kind}-{robots}-{seed}-{objective}.json"
+        path = cache / "worlds" / derivation_digest() / f"{kind}-{robots}-{seed}-{objective}.json"
         if path.exists():
             data = json.loads(path.read_text())
         else:

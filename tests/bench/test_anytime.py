@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 import bench.anytime as anytime
+import bench.cases as cases
 from bench.anytime import (
     QUICK,
     Config,
@@ -20,7 +21,7 @@ from bench.anytime import (
     target_group,
     target_table,
 )
-from bench.cases import conformance_cases, measured, world_case
+from bench.cases import conformance_cases, derivation_digest, measured, world_case
 from bench.report import JsonCache, config_from_args
 from service.solvers.exact import solve
 from service.solvers.registry import SolveContext
@@ -165,10 +166,32 @@ def test_each_solver_seed_runs_every_method_and_budget(monkeypatch, tmp_path: Pa
 def test_worlds_are_derived_once_and_cached(tmp_path: Path) -> None:
     case = world_case("wh_two_lane", 10, 0, tmp_path)
     assert case is not None and case.ref_cost is None and case.problem.n_conflicts > 0
-    (cached,) = (tmp_path / "worlds").iterdir()
+    (cached,) = (tmp_path / "worlds" / derivation_digest()).iterdir()
     again = world_case("wh_two_lane", 10, 0, tmp_path)
     assert again is not None and again.request == case.request
     assert json.loads(cached.read_text())["request"]["objective"] == "avg_completion"
+
+
+def test_worlds_of_another_derivation_are_derived_again(tmp_path: Path) -> None:
+    """A world cached by another derivation (another digest's folder, or the folder's
+    layout before digests) is not read: its graph may be one the code no longer makes."""
+    name = "wh_two_lane-10-0-avg_completion.json"
+    stale = {"refused": "derived by older code"}
+    for folder in (tmp_path / "worlds", tmp_path / "worlds" / "0123456789ab"):
+        folder.mkdir(parents=True, exist_ok=True)
+        (folder / name).write_text(json.dumps(stale))
+    case = world_case("wh_two_lane", 10, 0, tmp_path)
+    assert case is not None and case.name == "wh_two_lane/10/0"
+    assert (tmp_path / "worlds" / derivation_digest() / name).exists()
+
+
+def test_the_derivation_digest_follows_the_derivations_sources(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    digest = derivation_digest()
+    assert len(digest) == 12 and derivation_digest.__wrapped__() == digest
+    monkeypatch.setattr(cases, "DERIVATION_PACKAGES", ("scenarios", "geometry"))
+    assert derivation_digest.__wrapped__() != digest
 
 
 def test_quick_run_writes_everything(tmp_path: Path) -> None:
