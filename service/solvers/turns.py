@@ -6,7 +6,7 @@ the time given. Each turn starts from the best answer so far, so an annealed sea
 wandered off while hot comes back to it; with several cores a turn runs one search per
 core at once, each with a seed of its own, and the cheapest goes on: the turns are where
 the chains meet. Every turn's search cools over the same span (the first COOLED_SHARE of
-the time), then searches cold.
+the time, and all but MOST_COLD_S at least), then searches cold.
 
 Robot-priority search (:mod:`service.solvers.priority`) took a part of every cold turn
 from session 26 to session 50 (its part following the cost each search took off per
@@ -35,7 +35,7 @@ from service.core.assignment import Assignments
 from service.solvers.registry import SolveContext
 from service.solvers.reinsert import ReinsertResult, reinsert_search
 
-__all__ = ["COOLED_SHARE", "TurnsConfig", "TurnsResult", "take_turns"]
+__all__ = ["COOLED_SHARE", "MOST_COLD_S", "TurnsConfig", "TurnsResult", "take_turns"]
 
 
 # Share of the time given to the turns over which re-insertion's annealing cools (its
@@ -49,6 +49,18 @@ __all__ = ["COOLED_SHARE", "TurnsConfig", "TurnsResult", "take_turns"]
 # 5 s 0.9341 / 0.9319; over 0.7 1 s 0.8472, 5 s 0.9278; over 0.3 1 s 0.8472, 5 s 0.9193.
 # On kinds not tuned on (wh_mixed, wh_one_way, wh_parked at 250 robots): even at both.
 COOLED_SHARE = 0.5
+# ... and it searches cold for this many seconds at most (it cools over the rest): at 100
+# robots the cold turns stall after ~1-1.5 s (traced at 5 s, floor_dense/100/61: the last
+# five of ten turns found nothing cheaper), and the time they waste pays more while warm.
+# Measured (session 59, ``python -m bench.ab``, ``auto``, 5 s, cooling over 0.75 of the
+# time (1.25 s cold) against 0.5; wh_two_way, wh_two_lane, floor_dense, wh_mixed of 100
+# and wh_two_way, wh_two_lane of 250 robots, two worlds a kind, two seeds; cost ratio,
+# runs cheaper / dearer with it): ``--seed 600000`` 0.9826 -> 0.9870 (14 / 9), ``--seed
+# 700000`` 0.9840 -> 0.9888 (13 / 9); 250-robot warehouses 0.9533 -> 0.9844, 0.9703 ->
+# 0.9914 and the like; wh_two_way 100 dearer in one run (0.9868 -> 0.9631, 0 / 4), even
+# in the other. At 1 s (0.5 s cold, as before) cooling over 0.75 read 0.9776 / 0.9797
+# (12 / 17): mixed, so budgets up to 2.5 s keep half. See docs/benchmarks.md, "Session 59".
+MOST_COLD_S = 1.25
 # Chain k > 0 of a turn (see TurnsConfig.chains) searches with the turn's seed plus k times
 # this: no two chains of the turns of one search share a seed.
 CHAIN_SEED_STRIDE = 1_000_003
@@ -64,6 +76,7 @@ class TurnsConfig:
     # Re-insertion's annealing cools over this share of the time given, and searches cold
     # for the rest (see COOLED_SHARE).
     cooling_share: float = COOLED_SHARE
+    most_cold_s: float = MOST_COLD_S  # ... for this many seconds at most (see MOST_COLD_S)
     # Re-insertion searches a turn runs at once, each in a thread from the best answer so far
     # with a seed of its own; the cheapest goes on (None: one per core the solve has,
     # ``SolveContext.workers``). A step's kernels release the GIL, the Python between them
@@ -102,7 +115,8 @@ def take_turns(
     best, turns = start, 0
     now = time.monotonic()
     turn_s = min(config.turn_s, config.turn_share * (deadline - now))
-    cooling = (now, now + config.cooling_share * (deadline - now))  # then it searches cold
+    cold_s = min((1 - config.cooling_share) * (deadline - now), config.most_cold_s)
+    cooling = (now, deadline - cold_s)  # then it searches cold
     chains = config.chains or ctx.workers
     with ThreadPoolExecutor(chains) if chains > 1 else nullcontext() as pool:
         while (began := time.monotonic()) < deadline:

@@ -62,6 +62,27 @@ def test_reinsertion_cools_over_the_first_share_of_the_turns(
 ) -> None:
     """Every re-insertion search of the turns gets the same cooling span: from the turns'
     start over cooling_share of their time (then it searches cold to the deadline)."""
+    begin, warm_from, cold_at = _cooling_span(monkeypatch, TurnsConfig(cooling_share=0.25))
+    assert begin <= warm_from < begin + 0.01
+    assert abs((cold_at - warm_from) - 0.25 * (begin + 0.4 - warm_from)) < 1e-9
+
+
+def test_reinsertion_searches_cold_for_most_cold_s_at_most(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Where cooling_share would leave more than most_cold_s to search cold, the turns
+    cool until most_cold_s before the deadline."""
+    config = TurnsConfig(cooling_share=0.25, most_cold_s=0.1)
+    begin, warm_from, cold_at = _cooling_span(monkeypatch, config)
+    assert begin <= warm_from < begin + 0.01
+    assert abs(cold_at - (begin + 0.4 - 0.1)) < 1e-9
+
+
+def _cooling_span(
+    monkeypatch: pytest.MonkeyPatch, config: TurnsConfig
+) -> tuple[float, float, float]:
+    """Turns of ``config`` for 0.4 s on a wh_50 problem -> (their start, the cooling span
+    every re-insertion search of them got: it must be one)."""
     spans: list[tuple[float, float]] = []
 
     def recorded(*args, cooling, **kwargs):
@@ -69,16 +90,11 @@ def test_reinsertion_cools_over_the_first_share_of_the_turns(
         return reinsert_search(*args, cooling=cooling, **kwargs)
 
     monkeypatch.setattr(turns, "reinsert_search", recorded)
-    line = (DATA / "wh_50.jsonl").read_text().splitlines()[0]
-    ctx = _context(json.loads(line)["request"], "avg_completion")
-    start = plain_start(ctx)
-    cost = float(ctx.evaluator.evaluate(start).costs["avg_completion"][0])
+    ctx, start, cost = _wh50()
     begin = time.monotonic()
-    take_turns(ctx, start, cost, begin + 0.4, 0, TurnsConfig(cooling_share=0.25))
+    take_turns(ctx, start, cost, begin + 0.4, 0, config)
     assert len(spans) >= 3 and len(set(spans)) == 1
-    warm_from, cold_at = spans[0]
-    assert begin <= warm_from < begin + 0.01
-    assert abs((cold_at - warm_from) - 0.25 * (begin + 0.4 - warm_from)) < 1e-9
+    return begin, *spans[0]
 
 
 def _wh50() -> tuple[SolveContext, Assignments, float]:
