@@ -73,8 +73,8 @@ class TurnsConfig:
 
     turn_s: float = 0.5  # a turn's length, at most (1 s measured the same)
     turn_share: float = 0.25  # ... and at most this share of the time given
-    # Re-insertion's annealing cools over this share of the time given, and searches cold
-    # for the rest (see COOLED_SHARE).
+    # Re-insertion's annealing cools over this share of the time given at least (all but
+    # most_cold_s where that is more), and searches cold for the rest (see COOLED_SHARE).
     cooling_share: float = COOLED_SHARE
     most_cold_s: float = MOST_COLD_S  # ... for this many seconds at most (see MOST_COLD_S)
     # Re-insertion searches a turn runs at once, each in a thread from the best answer so far
