@@ -56,6 +56,14 @@ MONOTONE_OBJECTIVES: tuple[Objective, ...] = ("avg_completion", "max_completion"
 # of the samples to another thread costs more than walking them here.
 MIN_THREAD_WORK = 16_384
 
+# What :func:`_least_and_latest` walked: the constraint graph has a cycle; the least delays
+# only (their sum reached the bound it was given); the least and the latest delays.
+CYCLIC, WALKED_FORWARD, WALKED_BOTH = 0, 1, 2
+# A sum's bound in :meth:`Evaluator.evaluate_with_latest` is raised by this share of its
+# size (and as much again absolute), so that the kernel's sum, added in another order
+# than the cost's, skips the latest only of answers that the cost finds not cheaper.
+SUM_MARGIN = 1e-9
+
 # Threads that walk other threads' shares of a batch: one pool per process (rebuilt in a
 # forked child, which inherits the pool but not its threads); the kernel releases the GIL.
 _pool: tuple[int, ThreadPoolExecutor] | None = None
@@ -417,8 +425,12 @@ def _least_and_latest(
     latest: np.ndarray,  # (E+1,) float, out: latest delays
     slope: np.ndarray,  # (E+1,) float, out: held weight pushed per unit past the latest
     tol: float,  # a successor within this of the latest is pushed with it
-) -> bool:  # the constraint graph is acyclic (else all are left part-walked)
-    """One sample's least delays by the forward walk (:func:`_walk_arcs`), then its latest
+    weight: np.ndarray,  # (E+1,) float, the weights of a sum ...
+    bound: float,  # ... at or above which the latest are not sought (inf: always sought)
+) -> int:  # WALKED_BOTH, or WALKED_FORWARD (over the bound), or CYCLIC (part-walked)
+    """One sample's least delays by the forward walk (:func:`_walk_arcs`), then, unless
+    their ``weight``-ed sum reaches ``bound`` (a search that keeps only cheaper answers
+    needs no more of a dearer one: the backward pass is ~40 % of the call), its latest
     delays by a backward pass in the reverse of that walk's topological order: an
     event's latest is the least of its cap (its least delay if held, else none), its
     chain successor's latest and each arc target's latest less the arc's offset. One
@@ -441,7 +453,9 @@ def _least_and_latest(
         chain_next, indeg, out_start, out_to, out_off, removed, 0, no_extra,
         no_extra[:0], no_extra[:0], out_off[:0], d, queue,
     ):  # fmt: skip
-        return False
+        return CYCLIC
+    if bound < np.inf and (weight * d).sum() >= bound:
+        return WALKED_FORWARD
     total = held.sum()
     for q in range(n_events, -1, -1):
         e = queue[q]
@@ -458,7 +472,7 @@ def _least_and_latest(
         if e < n_events and chain_next[e] >= 0 and latest[chain_next[e]] <= value + tol:
             pushed += slope[chain_next[e]]
         slope[e] = min(pushed, total)
-    return True
+    return WALKED_BOTH
 
 
 @numba.njit(cache=True, nogil=True)
@@ -742,7 +756,11 @@ class Evaluator:
         """
         least, latest = np.zeros(self.n_events + 1), np.empty(self.n_events + 1)  # (E+1,)
         slope = np.empty(self.n_events + 1)  # (E+1,) unread here
-        if not self._least_and_latest(assignments, sample, held, least, latest, slope):
+        unbounded = (np.zeros(0), np.inf)
+        if (
+            self._least_and_latest(assignments, sample, held, least, latest, slope, *unbounded)
+            == CYCLIC
+        ):
             raise ValueError("the assignment's constraint graph has a cycle")
         return np.maximum(latest, evaluation.event_delay[sample])  # rounding: never below
 
@@ -768,38 +786,65 @@ class Evaluator:
         return self._at_least(latest, evaluation.event_delay[0]), slope
 
     def evaluate_with_latest(
-        self, assignment: Assignments, held: np.ndarray, slope: np.ndarray | None = None
+        self,
+        assignment: Assignments,
+        held: np.ndarray,
+        slope: np.ndarray | None = None,
+        below: tuple[Objective, float] | None = None,
     ) -> tuple[Evaluation, np.ndarray | None]:
         """:meth:`evaluate` of a single assignment and its :meth:`latest_delays` for
         ``held`` (E+1,) (bool, or float weights: held where > 0), from one walk of its
         arcs; None for the latter where the constraint graph has a cycle (the evaluation
-        is then the cyclic one). ``slope`` (E+1,) float, where given, gets each event's
-        slope (see :func:`_least_and_latest`): how much held weight a delay past its
-        latest pushes past theirs, per unit, to first order (at most once per way to a
-        held event, and at most the total held weight).
+        is then the cyclic one) or, with ``below`` (a sum objective and a cost), where
+        the answer's cost in that objective is not below that cost by more than rounding
+        (SUM_MARGIN; the backward pass skipped: a search that keeps only cheaper answers
+        needs no more of the others).
+        ``slope`` (E+1,) float, where given, gets each event's slope (see
+        :func:`_least_and_latest`): how much held weight a delay past its latest pushes
+        past theirs, per unit, to first order (at most once per way to a held event, and
+        at most the total held weight).
 
         Raises:
-            ValueError: ``assignment`` is not a single one.
+            ValueError: ``assignment`` is not a single one, or ``below``'s objective is
+                not a sum over robots.
         """
         if assignment.n_samples != 1:
             raise ValueError("the assignment must be a single one")
         delay = np.zeros((1, self.n_events + 1))  # (1, E+1)
         latest = np.empty(self.n_events + 1)  # (E+1,)
         slope = np.empty(self.n_events + 1) if slope is None else slope
-        if self._least_and_latest(assignment, 0, held, delay[0], latest, slope):
-            return self._evaluation(delay, np.ones(1, dtype=bool)), np.maximum(latest, delay[0])
-        return self.evaluate(assignment), None
+        weight, bound = (np.zeros(0), np.inf) if below is None else self._sum_bound(*below)
+        walked = self._least_and_latest(assignment, 0, held, delay[0], latest, slope, weight, bound)
+        if walked == CYCLIC:
+            return self.evaluate(assignment), None
+        evaluation = self._evaluation(delay, np.ones(1, dtype=bool))
+        return evaluation, np.maximum(latest, delay[0]) if walked == WALKED_BOTH else None
+
+    def _sum_bound(self, objective: Objective, cost: float) -> tuple[np.ndarray, float]:
+        """A cost of sum ``objective`` as a bound on the delays' weighted sum -> (weights
+        (E+1,), bound): an answer whose sum reaches the bound costs at least ``cost``
+        (avg_completion: the mean of free times plus completion delays; avg_delay: the
+        sum itself), raised by SUM_MARGIN against the order in which sums are added.
+
+        Raises:
+            ValueError: ``objective`` is not a sum over robots.
+        """
+        weight = self.objective_weights(objective)
+        if objective == "avg_completion":
+            free = self.problem.tp_time[self.problem.last_tp]  # (R,)
+            cost = cost * max(free.size, 1) - float(free.sum())
+        return weight, cost + SUM_MARGIN * (1.0 + abs(cost))
 
     def _least_and_latest(
         self, assignments: Assignments, sample: int, held: np.ndarray, d: np.ndarray,
-        latest: np.ndarray, slope: np.ndarray,
-    ) -> bool:  # fmt: skip
+        latest: np.ndarray, slope: np.ndarray, weight: np.ndarray, bound: float,
+    ) -> int:  # fmt: skip
         """:func:`_least_and_latest` of one sample (``d`` zeros on entry, all (E+1,))."""
         a_first = np.ascontiguousarray(assignments.a_first[sample], dtype=bool).view(np.uint8)
         following = np.ascontiguousarray(assignments.following[sample], dtype=bool).view(np.uint8)
         held = np.ascontiguousarray(held, dtype=np.float64)
         return _least_and_latest(
-            *self._fixed, a_first, following, held, d, latest, slope, self._tight
+            *self._fixed, a_first, following, held, d, latest, slope, self._tight, weight, bound
         )
 
     def delays_at(self, evaluation: Evaluation, sample: int, time_points: np.ndarray) -> np.ndarray:

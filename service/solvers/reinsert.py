@@ -1434,7 +1434,9 @@ def _kept(
     not a topological order of its node graph or a density clique holds more
     following-type conflicts than its budget."""
     slope = np.empty(held.size)
-    evaluation, latest = ctx.evaluator.evaluate_with_latest(found, held, slope)
+    evaluation, latest = ctx.evaluator.evaluate_with_latest(
+        found, held, slope, below=(ctx.objective, below)
+    )  # no latest (None) where not cheaper than below
     if latest is None or not float(evaluation.costs[ctx.objective][0]) < below:
         return None
     if not _ordered(_Static.of(ctx), found.a_first[0], pos):

@@ -572,6 +572,38 @@ def test_evaluate_with_latest_is_evaluate_and_latest_delays(
         np.testing.assert_array_equal(latest, ev.latest_delays(assignment, apart, held))
 
 
+@settings(max_examples=40, deadline=None)
+@given(
+    seed=st.integers(0, 10_000),
+    stitched=st.booleans(),
+    objective=st.sampled_from(["avg_completion", "avg_delay"]),
+    shift=st.sampled_from([-0.1, -1e-6, 0.0, 1e-6, 0.1]),
+)
+def test_evaluate_with_latest_below_skips_only_answers_not_cheaper(
+    seed: int, stitched: bool, objective: str, shift: float
+) -> None:
+    """With ``below``, the evaluation is the same; the latest delays are the same where
+    the cost is below it, and none where it is not (beyond rounding)."""
+    request = stitched_problem(seed, 10, 3.0) if stitched else small_problem(seed)
+    problem = _problem(request)
+    ev = Evaluator(problem)
+    assignment = _decoded(problem, seed)
+    held = ev.held_weights(objective)
+    full, latest = ev.evaluate_with_latest(assignment, held)
+    cost = float(full.costs[objective][0])
+    below = cost * (1 + shift) + shift
+    bounded, bounded_latest = ev.evaluate_with_latest(assignment, held, below=(objective, below))
+    np.testing.assert_array_equal(bounded.event_delay, full.event_delay)
+    assert float(bounded.costs[objective][0]) == cost
+    if cost < below:
+        assert latest is not None and bounded_latest is not None
+        np.testing.assert_array_equal(bounded_latest, latest)
+    elif shift < 0:
+        assert bounded_latest is None
+    with pytest.raises(ValueError, match="not a sum"):
+        ev.evaluate_with_latest(assignment, held, below=("max_completion", below))
+
+
 @pytest.mark.parametrize("seed", range(8))
 def test_binding_matches_its_definition(seed: int) -> None:
     """The compiled loop marks exactly the conflicts whose active slot's constraint holds
