@@ -660,11 +660,14 @@ def _repair(
     rounds: int,  # ROOM_ROUNDS
     last_more: bool,  # ROOM_LAST_MORE
     reach: np.ndarray,  # (V, V) bool, the fixed order's closure (see _fixed_reach), or (0, 0)
+    cap: float,  # the repair stops once its cost reaches this (inf: never)
 ) -> tuple[float, int]:
     """Put the picked robots back in ``order``, each on its passage past the robots
     placed so far (held ones, then those put back before it) -> (the picked robots' part
     of the objective plus the ``price`` of the pushes past a placed robot's latest, -1),
-    or (inf, the index in ``order`` of the first robot that had
+    or (inf, -1) once that reaches ``cap`` (it only grows as robots are put back: a
+    step's later orders stop where they cannot be the cheapest), or (inf, the index in
+    ``order`` of the first robot that had
     no passage: one fixed to pass a held robot first whose wait for robots put back
     before it made that too late). ``room`` must already count the picked robots'
     conflicts as exclusive; a robot's conflicts get it in turn, the ``preferred`` ones
@@ -738,6 +741,8 @@ def _repair(
         placed[r] = True
         for e in range(e0, e1):
             cost += weight[e] * d[e]
+        if cost >= cap:
+            return np.inf, -1
     return cost, -1
 
 
@@ -1121,7 +1126,7 @@ def _plan(
     pos = np.arange(p.n_nodes, dtype=np.float64)  # (V,) increasing along every path
     cost, _ = _repair(
         _fixed_first(order.astype(np.int64), *fixed), st, delay, delay.copy(), pos, room,
-        a_first, following, weight, following.copy(), np.inf, 0, False, reach,
+        a_first, following, weight, following.copy(), np.inf, 0, False, reach, np.inf,
     )  # fmt: skip
     return Assignments.single(a_first, following) if np.isfinite(cost) else None
 
@@ -1193,7 +1198,8 @@ def _best_of_orders(
     :func:`_fixed_first`) -> the cheapest repair's picked part of the objective with the
     ``price`` of its pushes (inf: none found passages for all), directions (M,), types
     (M,) and positions (V,); one compiled call for the step's repairs (their Python
-    around them took ~0.1 ms a step)."""
+    around them took ~0.1 ms a step). An order stops once its cost reaches the cheapest
+    so far (``cap`` of :func:`_repair`)."""
     picked = shuffled[0]
     freed = _freed(st, picked, a_first.size)
     freed &= st.fixed_type < 0  # a realized conflict's type stays, and its room taken
@@ -1212,7 +1218,7 @@ def _best_of_orders(
             cost, failed = _repair(
                 order, st, delay.copy(), latest.copy(), mine_pos, room.copy(), mine_a_first,
                 mine_following, weight, following, price, rounds, last_more,
-                np.zeros((0, 0), dtype=np.bool_),
+                np.zeros((0, 0), dtype=np.bool_), found_cost,
             )  # fmt: skip
             if failed < 0:
                 break
