@@ -205,10 +205,9 @@ def find_cliques(problem: Problem) -> Cliques:
     first = member_start[:-1]  # (Q,) every clique has two or more members
     rho = np.minimum.reduceat(problem.node_density[members], first) if first.size else first
     limits = problem.density_limits
-    extra = np.cumsum([lim.nodes.size for lim in limits], dtype=np.int64)  # (L,)
-    members = np.concatenate([members, *(lim.nodes for lim in limits)])
-    member_start = np.concatenate([member_start, member_start[-1] + extra])
-    budgets = np.concatenate([budget_for(rho), [budget_for(lim.max_robots) for lim in limits]])
+    members = np.concatenate([members, limits.nodes])
+    member_start = np.concatenate([member_start, member_start[-1] + limits.start[1:]])
+    budgets = np.concatenate([budget_for(rho), budget_for(limits.max_robots)])
     edge, start = _incidences(adjacency, members, member_start)
     return Cliques(
         budget=budgets.astype(np.int64),

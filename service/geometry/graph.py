@@ -40,7 +40,7 @@ import numpy as np
 from service.core.lazy import cached_property
 from service.core.path_schemas import PathsRequest
 from service.core.problem import (
-    DensityLimit,
+    DensityLimits,
     ErrorItem,
     Problem,
     ProblemError,
@@ -173,7 +173,8 @@ class CoordinationGraph:
             "robots": robots,
             "conflicts": self._wire_conflicts(),
             "density_limits": [
-                {"nodes": [ids[a], ids[b]], "max_robots": 1} for a, b in self.exclusive_pairs()
+                {"nodes": [ids[a], ids[b]], "max_robots": 1}
+                for a, b in self.exclusive_pairs().tolist()
             ],
             "options": base.options.model_dump(mode="json"),
             "previous": None
@@ -204,10 +205,7 @@ class CoordinationGraph:
             pair_enter=self._pair_times[:, [0, 2]],  # (M, 2) side a, side b
             pair_exit=self._pair_times[:, [1, 3]],
             forced=self.forced.astype(np.int8),
-            density_limits=tuple(
-                DensityLimit(np.array(sorted(pair), dtype=np.int64), 1)
-                for pair in self.exclusive_pairs()
-            ),
+            density_limits=DensityLimits.of_pairs(self.exclusive_pairs(), 1),
         )
 
     @property
@@ -263,9 +261,10 @@ class CoordinationGraph:
                 times[rows] = self.paths[int(robot[rows[0]])].time_at(s[rows])
         return times
 
-    def exclusive_pairs(self) -> list[tuple[int, int]]:
-        """Node pairs of the exclusive-only conflicts (each a density limit of one robot)."""
-        return [tuple(p) for p in self.conf_node[~self.conf_may_follow].tolist()]
+    def exclusive_pairs(self) -> np.ndarray:
+        """(X, 2) int: node pairs of the exclusive-only conflicts (each a density limit of
+        one robot)."""
+        return self.conf_node[~self.conf_may_follow]
 
 
 def build_graph(paths: Sequence[RobotPath], settings: GeometrySettings) -> CoordinationGraph:

@@ -9,9 +9,11 @@ from typing import Any
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import service.core.problem as problem_module
-from service.core.problem import Problem, ProblemError, problem_from_request
+from service.core.problem import DensityLimits, Problem, ProblemError, problem_from_request
 from service.core.schemas import ScheduleRequest
 from service.learning.generate import stitched_problem
 from tests.reference import tiny_request
@@ -245,3 +247,42 @@ def test_valid_conflicts_read_in_bulk_equal_the_walk(
         a, b = getattr(bulk, field), getattr(walked, field)
         assert a.dtype == b.dtype and a.shape == b.shape and np.array_equal(a, b), field
     assert bulk.pair_exit.shape[0] == len(req.conflicts)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    groups=st.lists(
+        st.tuples(st.sets(st.integers(0, 30), min_size=2, max_size=5), st.integers(1, 4)),
+        max_size=12,
+    ),
+    data=st.data(),
+)
+def test_density_limits_taken_keep_their_nodes_renumbered_and_sorted(
+    groups: list[tuple[set[int], int]], data: st.DataObject
+) -> None:
+    """Limits in CSR arrays read back limit by limit; those taken keep their order, their
+    budgets and their nodes under the new numbering (sorted, as the numbering increases)."""
+    nodes = [sorted(g) for g, _ in groups]
+    limits = DensityLimits(
+        np.array([v for g in nodes for v in g], dtype=np.int64),
+        np.concatenate([[0], np.cumsum([len(g) for g in nodes])]).astype(np.int64),
+        np.array([m for _, m in groups], dtype=np.int64),
+    )
+    assert [(lim.nodes.tolist(), lim.max_robots) for lim in limits] == [
+        (g, m) for g, (_, m) in zip(nodes, groups, strict=True)
+    ]
+    kept_nodes = np.array(data.draw(st.lists(st.booleans(), min_size=31, max_size=31)))
+    renumber = np.where(kept_nodes, np.cumsum(kept_nodes) - 1, -1)  # (31,)
+    keep = np.array([all(kept_nodes[v] for v in g) for g in nodes], dtype=bool)
+    taken = limits.take(keep, renumber)
+    assert [(lim.nodes.tolist(), lim.max_robots) for lim in taken] == [
+        (renumber[g].tolist(), m) for g, (_, m), k in zip(nodes, groups, keep, strict=True) if k
+    ]
+    assert all(np.all(np.diff(lim.nodes) > 0) for lim in taken)
+
+
+def test_density_limits_of_pairs_sort_each_pair() -> None:
+    limits = DensityLimits.of_pairs(np.array([[3, 1], [0, 2]]), 1)
+    assert [(lim.nodes.tolist(), lim.max_robots) for lim in limits] == [([1, 3], 1), ([0, 2], 1)]
+    assert len(DensityLimits.of_pairs(np.zeros((0, 2), dtype=np.int64), 1)) == 0
+    assert len(DensityLimits.empty()) == 0 and not DensityLimits.empty()

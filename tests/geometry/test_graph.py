@@ -115,7 +115,7 @@ def assert_wire_is_the_graph(graph: CoordinationGraph, wire: ScheduleRequest) ->
         assert [c.b_enter, c.b_exit] == paths[j].time_at([y0, y1]).tolist()
         assert c.first == {1: "a", -1: "b", 0: None}[int(graph.forced[m])]
     assert [d.nodes for d in wire.density_limits] == [
-        [ids[a], ids[b]] for a, b in graph.exclusive_pairs()
+        [ids[a], ids[b]] for a, b in graph.exclusive_pairs().tolist()
     ]
 
 
@@ -298,7 +298,7 @@ def test_crossing_robots_form_one_exclusive_conflict() -> None:
     wire = assert_graph_sound(req, graph)
     assert wire is not None
     assert graph.n_conflicts == 1 and graph.node_robot.tolist() == [0, 1]
-    assert graph.node_density.tolist() == [2, 2] and graph.exclusive_pairs() == [(0, 1)]
+    assert graph.node_density.tolist() == [2, 2] and graph.exclusive_pairs().tolist() == [[0, 1]]
     assert graph.forced.tolist() == [0]
     # Both sections are centred on the crossing and span at least the two radii + margin.
     (x0, x1), (y0, y1) = graph.node_span.tolist()
@@ -327,7 +327,9 @@ def test_following_only_for_co_directional_sections() -> None:
     req, opposite = _graph([robot("a", LANE_A), robot("b", LANE_B[::-1])])
     wire = assert_graph_sound(req, opposite)
     assert wire is not None and following_alone_allowed(wire) == [False]
-    assert opposite.node_density.tolist() == [2, 2] and opposite.exclusive_pairs() == [(0, 1)]
+    assert opposite.node_density.tolist() == [2, 2] and opposite.exclusive_pairs().tolist() == [
+        [0, 1]
+    ]
     req, mixed = _graph([robot("a", LANE_A), robot("b", LANE_B), robot("c", [[5, -5], [5, 5]])])
     wire = assert_graph_sound(req, mixed)
     assert wire is not None and mixed.n_conflicts == 3
