@@ -454,8 +454,12 @@ def _least_and_latest(
         no_extra[:0], no_extra[:0], out_off[:0], d, queue,
     ):  # fmt: skip
         return CYCLIC
-    if bound < np.inf and (weight * d).sum() >= bound:
-        return WALKED_FORWARD
+    if bound < np.inf:
+        summed = 0.0
+        for e in range(weight.size):  # no (E+1,) temporary
+            summed += weight[e] * d[e]
+        if summed >= bound:
+            return WALKED_FORWARD
     total = held.sum()
     for q in range(n_events, -1, -1):
         e = queue[q]
@@ -526,6 +530,9 @@ class Evaluator:
         np.add.at(weights, self._tp_event, 1.0 / (counts[tp_robot] * problem.n_robots))
         self._delay_weight = weights  # (E+1,): avg_delay = event_delay @ weights
         self._last_event = self._tp_event[problem.last_tp]  # (R,)
+        # Each sum objective's (weights (E+1,), robots, summed free times), found once:
+        # re-insertion search bounds every repair it evaluates (see _sum_bound).
+        self._sum_forms: dict[Objective, tuple[np.ndarray, int, float]] = {}
 
     def _build_slots(self, problem: Problem) -> None:
         """Fixed arrays of the 2M conflict constraints, and each event's chain in-degree.
@@ -829,10 +836,16 @@ class Evaluator:
         Raises:
             ValueError: ``objective`` is not a sum over robots.
         """
-        weight = self.objective_weights(objective)
-        if objective == "avg_completion":
+        if objective not in self._sum_forms:
             free = self.problem.tp_time[self.problem.last_tp]  # (R,)
-            cost = cost * max(free.size, 1) - float(free.sum())
+            self._sum_forms[objective] = (
+                self.objective_weights(objective),
+                max(free.size, 1),
+                float(free.sum()),
+            )
+        weight, robots, free_sum = self._sum_forms[objective]
+        if objective == "avg_completion":
+            cost = cost * robots - free_sum
         return weight, cost + SUM_MARGIN * (1.0 + abs(cost))
 
     def _least_and_latest(
