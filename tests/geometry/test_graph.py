@@ -110,11 +110,11 @@ def assert_wire_is_the_graph(graph: CoordinationGraph, wire: ScheduleRequest) ->
         a, b = graph.conf_node[m].tolist()
         i, j = graph.node_robot[[a, b]].tolist()
         x0, x1, y0, y1 = graph.conf_span[m]
-        assert (c.a, c.b) == (ids[a], ids[b])
-        assert [c.a_enter, c.a_exit] == paths[i].time_at([x0, x1]).tolist()
-        assert [c.b_enter, c.b_exit] == paths[j].time_at([y0, y1]).tolist()
-        assert c.first == {1: "a", -1: "b", 0: None}[int(graph.forced[m])]
-    assert [d.nodes for d in wire.density_limits] == [
+        assert (c["a"], c["b"]) == (ids[a], ids[b])
+        assert [c["a_enter"], c["a_exit"]] == paths[i].time_at([x0, x1]).tolist()
+        assert [c["b_enter"], c["b_exit"]] == paths[j].time_at([y0, y1]).tolist()
+        assert c.get("first") == {1: "a", -1: "b", 0: None}[int(graph.forced[m])]
+    assert [d["nodes"] for d in wire.density_limits] == [
         [ids[a], ids[b]] for a, b in graph.exclusive_pairs().tolist()
     ]
 
@@ -333,7 +333,7 @@ def test_following_only_for_co_directional_sections() -> None:
     req, mixed = _graph([robot("a", LANE_A), robot("b", LANE_B), robot("c", [[5, -5], [5, 5]])])
     wire = assert_graph_sound(req, mixed)
     assert wire is not None and mixed.n_conflicts == 3
-    crossing = [m for m, c in enumerate(wire.conflicts) if c.b.startswith("c/")]
+    crossing = [m for m, c in enumerate(wire.conflicts) if c["b"].startswith("c/")]
     assert len(crossing) == 2
     allowed = following_alone_allowed(wire)
     assert not any(allowed[m] for m in crossing)
@@ -373,7 +373,7 @@ def test_parked_robot_passes_first() -> None:
     wire = assert_graph_sound(req, graph)
     assert wire is not None and graph.n_conflicts == 1
     assert graph.forced.tolist() == [-1]
-    assert wire.conflicts[0].first == "b"
+    assert wire.conflicts[0].get("first") == "b"
     assert graph.conf_span[0, 2] == 0.0
 
 

@@ -248,7 +248,7 @@ def test_a_robot_parked_at_its_start_goes_first() -> None:
     req = request(SCENARIOS["parked_start"]())
     out = plan(req)
     graph = graph_of(out)
-    assert graph is not None and graph.conflicts[0].first == "b"
+    assert graph is not None and graph.conflicts[0].get("first") == "b"
     assert out.assignment[0]["from"] == "parked/0"
     done = _completions(out)
     assert done["parked"] == pytest.approx(13.7)  # never waits

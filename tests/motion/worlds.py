@@ -272,7 +272,7 @@ def evaluated(out: PathsScheduleResponse) -> tuple[dict[str, float], dict[str, f
     graph = graph_of(out)
     assert graph is not None
     a_first = np.array(
-        [a["from"] == c.a for a, c in zip(out.assignment, graph.conflicts, strict=True)]
+        [a["from"] == c["a"] for a, c in zip(out.assignment, graph.conflicts, strict=True)]
     )
     following = np.array([a["type"] == "following" for a in out.assignment], dtype=bool)
     problem = problem_from_request(graph)
