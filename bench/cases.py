@@ -35,7 +35,7 @@ from service.core.schemas import Objective, ScheduleRequest, ScheduleResponse
 from service.motion.plan import world_request
 from service.scenarios import generate
 from service.settings import MAX_CLIQUE_INCIDENCES, MAX_CLIQUES, Settings
-from service.solvers.dispatch import DispatchPolicy, solve_problem
+from service.solvers.dispatch import DispatchPolicy, dispatch, solve_problem
 
 __all__ = [
     "CONFORMANCE",
@@ -248,16 +248,26 @@ def with_options(request: ScheduleRequest, options: dict[str, Any]) -> ScheduleR
 
 
 def solve_case(
-    case: Case, policy: DispatchPolicy, options: dict[str, Any]
+    case: Case, policy: DispatchPolicy, options: dict[str, Any], *, from_bytes: bool = False
 ) -> tuple[ScheduleResponse, float]:
     """``case`` through the dispatcher with ``options``, and the seconds it took.
 
-    The problem and cliques are the case's, built once: the time is the solve, its
-    check and the rendering of its answer, not the request's validation.
+    By default the problem and cliques are the case's, built once: the time is the
+    solve, its check and the rendering of its answer, not the request's reading. With
+    ``from_bytes`` the solve is timed as the service times a graph-form body: the clock
+    and the deadline (its time limit) start before the request's JSON bytes are
+    validated, and the problem and cliques are built from them, so the search gets what
+    the service would give it (at 250 robots ~0.1-0.2 s less).
     """
     request = with_options(case.request, options)
-    start = time.perf_counter()
-    answer = solve_problem(case.problem, request, policy, cliques=case.cliques)
+    if not from_bytes:
+        start = time.perf_counter()
+        answer = solve_problem(case.problem, request, policy, cliques=case.cliques)
+        return answer, time.perf_counter() - start
+    body = request.model_dump_json(exclude_none=True).encode()
+    start, arrival = time.perf_counter(), time.monotonic()
+    limit = request.options.time_limit_s or policy.default_time_limit_s
+    answer = dispatch(ScheduleRequest.model_validate_json(body), policy, deadline=arrival + limit)
     return answer, time.perf_counter() - start
 
 

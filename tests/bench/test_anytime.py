@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -10,6 +11,7 @@ import pytest
 
 import bench.anytime as anytime
 import bench.cases as cases
+import service.solvers.dispatch as dispatch_module
 from bench.anytime import (
     QUICK,
     Config,
@@ -23,6 +25,7 @@ from bench.anytime import (
 )
 from bench.cases import conformance_cases, derivation_digest, measured, world_case
 from bench.report import JsonCache, config_from_args
+from service.core.problem import problem_from_request
 from service.solvers.exact import solve
 from service.solvers.registry import SolveContext
 
@@ -134,6 +137,42 @@ def test_quick_defaults_and_flags() -> None:
         QUICK,
     )
     assert cfg == replace(Config(), methods=("auto",), budgets=(1.0,), worlds=("wh_mixed:50",))
+    assert Config().from_bytes
+    assert not config_from_args(_parse_args(["--prepared"]), Config(), QUICK).from_bytes
+
+
+def test_a_solve_from_the_requests_bytes_answers_as_the_prepared_one_within_its_limit(
+    monkeypatch,
+) -> None:
+    """Timed from its bytes, a case reads its request as the service does (validated from
+    JSON, its problem built again) and answers as the prepared case does; its clock and
+    deadline cover the reading."""
+    (case,) = conformance_cases(("wh_100",), per_set=1)  # unproven in 0.5 s: uses its time
+    policy = cases.DispatchPolicy()
+    options = {"solver": "fcfs", "time_limit_s": 1.0, "seed": 0}
+    prepared, _ = cases.solve_case(case, policy, options)
+    built = []
+
+    def counted(request):
+        built.append(request)
+        return problem_from_request(request)
+
+    monkeypatch.setattr(dispatch_module, "problem_from_request", counted)
+    answer, seconds = cases.solve_case(case, policy, options, from_bytes=True)
+    assert len(built) == 1 and built[0] is not case.request
+    assert answer.cost == prepared.cost and answer.assignment == prepared.assignment
+    assert 0 < seconds < 1.0
+
+    validate = cases.ScheduleRequest.model_validate_json
+
+    def slow_reading(raw: bytes):
+        time.sleep(0.4)
+        return validate(raw)
+
+    monkeypatch.setattr(cases.ScheduleRequest, "model_validate_json", slow_reading)
+    limited = {**options, "solver": "auto", "time_limit_s": 0.5}
+    answer, seconds = cases.solve_case(case, policy, limited, from_bytes=True)
+    assert seconds < 0.5 * 1.1 + 0.05, "the reading counts against the time limit"
 
 
 def test_each_solver_seed_runs_every_method_and_budget(monkeypatch, tmp_path: Path) -> None:
