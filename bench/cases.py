@@ -262,7 +262,7 @@ def solve_case(
     request = with_options(case.request, options)
     if not from_bytes:
         start = time.perf_counter()
-        answer = solve_problem(case.problem, request, policy, cliques=case.cliques)
+        answer = solve_problem(case.problem, request, policy, cliques=case.cliques).response()
         return answer, time.perf_counter() - start
     body = request.model_dump_json(exclude_none=True).encode()
     start, arrival = time.perf_counter(), time.monotonic()

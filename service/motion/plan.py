@@ -53,7 +53,12 @@ from service.simulation.executor import (
     on_clock,
 )
 from service.simulation.simulate import plan_to_wire
-from service.solvers.dispatch import DispatchPolicy, InvalidAnswerError, dispatch_problem
+from service.solvers.dispatch import (
+    Checked,
+    DispatchPolicy,
+    InvalidAnswerError,
+    dispatch_problem,
+)
 
 __all__ = [
     "MOTION_RESERVE",
@@ -155,7 +160,7 @@ def plan_paths(
     problem = graph.problem()
     progress = None if state is None or problem is None else progress_at(graph, state)
     graph_done = time.perf_counter()
-    answer: ScheduleResponse | None = None
+    answer: Checked | None = None
     units = 0 if problem is None else work_units(problem)
     if problem is not None:
         solve_due = max(deadline - reserve.seconds(units), time.monotonic() + MIN_SOLVE_S)
@@ -168,7 +173,7 @@ def plan_paths(
             progress=progress,
         )
     solve_done = time.perf_counter()
-    executed = _execute_safely(graph, decision(graph, answer), state)
+    executed = _execute_safely(graph, _decided(answer), state)
     graph_wire = graph.to_wire(request, request.previous, progress)
     response = _render(request, graph, graph_wire, answer, executed, solve_done - graph_done, state)
     # Motion: everything after the solve, building this answer included.
@@ -181,8 +186,16 @@ def plan_paths(
     return response
 
 
+def _decided(answer: Checked | None) -> Decision:
+    """The checked answer's assignment as arrays (the derived problem keeps the graph's
+    conflict order, side a first where the graph's first node passes first)."""
+    if answer is None:
+        return Decision(np.zeros(0, dtype=bool), np.zeros(0, dtype=bool))
+    return Decision(answer.output.assignment.a_first[0], answer.output.assignment.following[0])
+
+
 def decision(graph: CoordinationGraph, answer: ScheduleResponse | None) -> Decision:
-    """The dispatcher's assignment (in the graph's conflict order) as arrays."""
+    """A graph-form answer's assignment (in the graph's conflict order) as arrays."""
     if answer is None:
         return Decision(np.zeros(0, dtype=bool), np.zeros(0, dtype=bool))
     ids = graph.node_ids()
@@ -223,7 +236,7 @@ def _render(
     request: PathsRequest,
     graph: CoordinationGraph,
     graph_wire: dict[str, Any] | None,
-    answer: ScheduleResponse | None,
+    answer: Checked | None,
     executed: _Executed,
     solve_s: float,
     state: State | None,
@@ -345,22 +358,16 @@ def _assignment(graph: CoordinationGraph, decision: Decision) -> list[Assignment
     ]
 
 
-def _solver_info(
-    answer: ScheduleResponse | None, executed: _Executed, runtime_s: float
-) -> SolverInfoOut:
+def _solver_info(answer: Checked | None, executed: _Executed, runtime_s: float) -> SolverInfoOut:
     """The graph solver's info (its runtime: the whole dispatch), noting when the plan had
     to be executed all-exclusive."""
     if answer is None:
         return SolverInfoOut(
             name="none", optimal=True, runtime_s=runtime_s, detail="no two robots interfere"
         )
-    info = answer.solver.model_copy(update={"runtime_s": runtime_s})
-    if bool(np.any(executed.decision.following != _decision_types(answer))):
+    info = answer.info.model_copy(update={"runtime_s": runtime_s})
+    if bool(np.any(executed.decision.following != _decided(answer).following)):
         info = info.model_copy(
             update={"optimal": False, "detail": "executed with every conflict exclusive"}
         )
     return info
-
-
-def _decision_types(answer: ScheduleResponse) -> np.ndarray:
-    return np.array([out["type"] == "following" for out in answer.assignment], dtype=bool)

@@ -13,7 +13,7 @@ import logging
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING, NamedTuple, Protocol
 
 import numpy as np
 
@@ -61,6 +61,7 @@ if TYPE_CHECKING:
 __all__ = [
     "FALLBACKS",
     "LAST_RESORT",
+    "Checked",
     "DispatchPolicy",
     "InvalidAnswerError",
     "Job",
@@ -140,7 +141,7 @@ def dispatch(
         deadline=deadline,
         previous=request.previous,
         progress=request.progress,
-    )
+    ).response()
 
 
 def dispatch_problem(
@@ -151,9 +152,10 @@ def dispatch_problem(
     deadline: float | None = None,
     previous: list[PreviousConflictIn] | None = None,
     progress: ProgressIn | None = None,
-) -> ScheduleResponse:
+) -> Checked:
     """:func:`dispatch` for a problem already built (e.g. derived from paths), with the
-    graph-form ``previous`` and ``progress`` of a re-schedule.
+    graph-form ``previous`` and ``progress`` of a re-schedule: the checked answer, not yet
+    rendered (a paths-form answer renders its own, from the executed motion).
 
     Raises:
         ProblemError: ``previous`` or ``progress`` contradict the problem.
@@ -162,6 +164,21 @@ def dispatch_problem(
     if progress is not None:
         problem = residual_problem(problem, progress_from_wire(problem, progress), warm)
     return solve_problem(problem, job, policy, deadline=deadline, warm=warm)
+
+
+class Checked(NamedTuple):
+    """A solve's answer before it is rendered: the context it was solved in, the answer,
+    who gave it and how, and the checks it passed. Rendering the graph-form response
+    (:meth:`response`) costs ~30 ms at 250 robots, which a paths-form answer skips."""
+
+    ctx: SolveContext
+    output: SolverOutput
+    info: SolverInfoOut
+    checks: ChecksOut
+
+    def response(self) -> ScheduleResponse:
+        """The graph-form wire response (evaluated, with its schedule and dependencies)."""
+        return _render(self.ctx.objective, self.ctx, self.output, self.info, self.checks)
 
 
 def solve_problem(
@@ -175,8 +192,9 @@ def solve_problem(
     decoder: Decoder | None = None,
     orientation: OrientationGraph | None = None,
     reserve_s: float | None = None,
-) -> ScheduleResponse:
-    """Solve a validated ``problem`` with ``job``'s objective and options.
+) -> Checked:
+    """Solve a validated ``problem`` with ``job``'s objective and options -> the checked
+    answer (:class:`Checked`; its ``response()`` is the graph-form wire response).
 
     Args:
         warm: a valid assignment to start local search from (the previous answer of a
@@ -237,7 +255,7 @@ def solve_problem(
         density=bool(checks.density[0]),
         forced=bool(checks.forced[0]),
     )
-    return _render(job.objective, ctx, output, info, checked)
+    return Checked(ctx, output, info, checked)
 
 
 def _check_realized_density(problem: Problem, cliques: Cliques) -> None:

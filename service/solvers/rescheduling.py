@@ -114,7 +114,7 @@ class Rescheduler:
             decoder=self.decoder.for_problem(residual),
             orientation=self.orientation.for_problem(residual),
             reserve_s=reserve,
-        )
+        ).response()
         self.tails.append(time.monotonic() - (deadline - reserve))
         return answer
 

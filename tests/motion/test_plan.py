@@ -20,11 +20,12 @@ from service.core.problem import ProblemError
 from service.geometry.graph import GeometrySettings, build_graph
 from service.geometry.paths import RobotPath
 from service.motion.dependencies import Decision, dependency_plan
+from service.motion.plan import _decided, decision
 from service.motion.trajectories import trajectories
 from service.simulation.clearance import check_clearance
 from service.simulation.disturbances import Rate
 from service.simulation.executor import Run, execute
-from service.solvers.dispatch import DispatchPolicy, dispatch
+from service.solvers.dispatch import DispatchPolicy, dispatch, dispatch_problem
 from tests.motion.reference_clearance import position, reference_clearance
 from tests.motion.scenarios import SCENARIOS, Fleet
 from tests.motion.worlds import (
@@ -119,6 +120,25 @@ def test_every_answer_moves_without_collision(
     assert_motion_valid(req, out)
     if out.graph is not None and all(a["type"] == "exclusive" for a in out.assignment):
         _assert_exclusive_matches(out, equal=False)
+
+
+@settings(max_examples=30, deadline=None, derandomize=True)
+@given(robots=fleets(side=10.0), solver=st.sampled_from(["fcfs", "tabu", "exact"]))
+def test_the_checked_answer_decides_as_its_rendered_response(robots: Fleet, solver: str) -> None:
+    """A paths-form answer reads the dispatcher's checked answer without rendering it: the
+    same directions and types as the graph-form response it would have rendered."""
+    req = request(robots, solver=solver, time_limit_s=0.2)
+    try:
+        graph = build_graph(paths_of(req), GeometrySettings())
+    except ProblemError:
+        return
+    problem = graph.problem()
+    if problem is None:
+        return
+    checked = dispatch_problem(problem, req, DispatchPolicy())
+    fast, rendered = _decided(checked), decision(graph, checked.response())
+    assert np.array_equal(fast.a_first, rendered.a_first)
+    assert np.array_equal(fast.following, rendered.following)
 
 
 def _execute(req: PathsRequest, a_first: np.ndarray, following: np.ndarray) -> tuple[Run, list]:
