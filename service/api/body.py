@@ -22,8 +22,9 @@ names its fault exactly as it always has.
 A callable discriminator (the schedule route's two forms, told apart by the first robot)
 makes pydantic build the body's Python objects before it validates, which costs as much as
 ``json.loads``; the members tried in turn are validated from the JSON as one model is
-(wh_two_way/250/0, 3.8 MB: 176-256 -> 115-151 ms, the graph form alone 123-129; least of
-15, session 61). A paths body pays a failed graph-form attempt first.
+(wh_two_way/250/0, 3.8 MB, least of 15, session 61: 176-256 -> 115-151 ms, the graph form
+alone 123-129; 68-75 since conflicts and limits are TypedDicts). A paths body pays a failed
+graph-form attempt first.
 """
 
 from __future__ import annotations
