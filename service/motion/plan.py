@@ -54,6 +54,7 @@ from service.simulation.executor import (
 )
 from service.simulation.simulate import plan_to_wire
 from service.solvers.dispatch import (
+    CHECK_RESERVE_S,
     Checked,
     DispatchPolicy,
     InvalidAnswerError,
@@ -171,6 +172,7 @@ def plan_paths(
             deadline=solve_due,
             previous=request.previous,
             progress=progress,
+            reserve_s=CHECK_RESERVE_S,  # its graph-form response is not rendered
         )
     solve_done = time.perf_counter()
     executed = _execute_safely(graph, _decided(answer), state)
