@@ -33,7 +33,6 @@ from service.core.schemas import (
     NodeTimesOut,
     RobotScheduleOut,
     ScheduleRequest,
-    ScheduleResponse,
     SolverInfoOut,
 )
 from service.geometry.graph import CoordinationGraph, GeometrySettings, build_graph
@@ -194,22 +193,6 @@ def _decided(answer: Checked | None) -> Decision:
     if answer is None:
         return Decision(np.zeros(0, dtype=bool), np.zeros(0, dtype=bool))
     return Decision(answer.output.assignment.a_first[0], answer.output.assignment.following[0])
-
-
-def decision(graph: CoordinationGraph, answer: ScheduleResponse | None) -> Decision:
-    """A graph-form answer's assignment (in the graph's conflict order) as arrays."""
-    if answer is None:
-        return Decision(np.zeros(0, dtype=bool), np.zeros(0, dtype=bool))
-    ids = graph.node_ids()
-    a_first = np.array(
-        [
-            ids[a] == out["from"]
-            for out, a in zip(answer.assignment, graph.conf_node[:, 0], strict=True)
-        ],
-        dtype=bool,
-    )
-    following = np.array([out["type"] == "following" for out in answer.assignment], dtype=bool)
-    return Decision(a_first, following)
 
 
 def _execute_safely(graph: CoordinationGraph, decision: Decision, state: State | None) -> _Executed:

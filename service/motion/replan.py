@@ -36,8 +36,7 @@ from service.core.schemas import (
     ScheduleResponse,
 )
 from service.geometry.graph import CoordinationGraph
-from service.motion.dependencies import dependency_plan
-from service.motion.plan import decision
+from service.motion.dependencies import Decision, dependency_plan
 from service.motion.progress import progress_at
 from service.simulation.disturbances import Rate
 from service.simulation.executor import DependencyPlan, Execution, Run
@@ -46,6 +45,7 @@ __all__ = [
     "Replan",
     "Rescheduled",
     "Solve",
+    "decision",
     "execute_rescheduled",
     "plan_of",
     "previous_of",
@@ -64,6 +64,20 @@ _PREVIOUS = TypeAdapter(list[PreviousConflictIn])
 def previous_of(answer: ScheduleResponse) -> list[PreviousConflictIn]:
     """``answer``'s assignment as the ``previous`` of the next re-schedule."""
     return _PREVIOUS.validate_python(answer.assignment)
+
+
+def decision(graph: CoordinationGraph, answer: ScheduleResponse) -> Decision:
+    """A graph-form answer's assignment (in the graph's conflict order) as arrays."""
+    ids = graph.node_ids()
+    a_first = np.array(
+        [
+            ids[a] == out["from"]
+            for out, a in zip(answer.assignment, graph.conf_node[:, 0], strict=True)
+        ],
+        dtype=bool,
+    )
+    following = np.array([out["type"] == "following" for out in answer.assignment], dtype=bool)
+    return Decision(a_first, following)
 
 
 def plan_of(graph: CoordinationGraph, answer: ScheduleResponse) -> DependencyPlan:

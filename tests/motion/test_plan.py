@@ -20,7 +20,8 @@ from service.core.problem import ProblemError
 from service.geometry.graph import GeometrySettings, build_graph
 from service.geometry.paths import RobotPath
 from service.motion.dependencies import Decision, dependency_plan
-from service.motion.plan import _decided, decision
+from service.motion.plan import _decided
+from service.motion.replan import decision
 from service.motion.trajectories import trajectories
 from service.simulation.clearance import check_clearance
 from service.simulation.disturbances import Rate
