@@ -188,7 +188,7 @@ def solve_world(
     )
     start = time.perf_counter()
     try:
-        answer = plan_paths(request, policy, GeometrySettings())
+        answer = plan_paths(request, policy, GeometrySettings()).response
     except ProblemError as exc:
         return {"status": REFUSED, "message": str(exc), "e2e_s": time.perf_counter() - start}
     except Exception as exc:  # a bug in the service: reported as an error, never hidden

@@ -50,10 +50,11 @@ def main(argv: list[str] | None = None) -> int:
     from service.learning.store import load_all  # torch is imported only when planning
 
     models, _ = load_all(args.model_store, OBJECTIVES)
-    answer = plan_paths(
+    planned = plan_paths(
         PathsRequest.model_validate(body), DispatchPolicy(models=models), GeometrySettings()
     )
-    args.out.write_text(answer.model_dump_json(by_alias=True))
+    args.out.write_bytes(planned.content)
+    answer = planned.response
     print(
         f"{answer.solver.name}: cost {answer.cost:.3f} ({answer.objective}), "
         f"collision free {answer.checks.collision_free}, "

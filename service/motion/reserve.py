@@ -1,7 +1,9 @@
 """The time a paths-form answer keeps for its motion, learned from the answers made.
 
-After the solve, a paths-form answer still executes the plan, checks clearance and
-builds its trajectories and dependencies: no solver can cut that short, so the solve
+After the solve, a paths-form answer still executes the plan, checks clearance,
+builds its trajectories and dependencies and encodes the answer as JSON (since
+session 62: before, the encoding, ~0.08 s at 250 robots, was left to the margin and
+1-s requests of 250 robots ended at up to 1.25 s): no solver can cut that short, so the solve
 must stop early enough for it to fit in the request's time limit. A fixed share of the
 limit (10 % until session 32) left 1-s requests of 250 robots 1.09-1.47 s end to end
 (motion 0.17-0.41 s), and how long motion takes depends on the machine and the hour as
@@ -42,7 +44,7 @@ class MotionReserve:
 
     seconds_per_unit: float = 6e-6  # the 250-robot worlds on the Xeon, rounded up
     base_s: float = 0.01  # what motion takes however small the problem (~10 ms at 25 robots)
-    margin: float = 1.25  # the answer's JSON encoding (~15 % of motion) and jitter
+    margin: float = 1.25  # jitter: the same motion varies by ~30 % from one run to the next
     min_units: int = 2_000
     decay: float = 0.2
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False, compare=False)

@@ -48,7 +48,7 @@ def test_a_disturbed_fleet_is_rescheduled_without_collision(seed: int) -> None:
     body = _world(seed)
     first, progress = _disturbed_progress(body, seed, at=15.0 + 5 * seed)
     again = {**body, "previous": first["assignment"], "progress": progress}
-    answer = plan_paths(PathsRequest.model_validate(again), POLICY, GEOMETRY)
+    answer = plan_paths(PathsRequest.model_validate(again), POLICY, GEOMETRY).response
     assert answer.checks.collision_free and answer.checks.forced
     assert answer.checks.acyclic and answer.checks.density
     at = progress["time"]

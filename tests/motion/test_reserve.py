@@ -3,6 +3,7 @@ taken off the solve's deadline."""
 
 from __future__ import annotations
 
+import json
 import time
 from typing import Any
 
@@ -87,7 +88,7 @@ def test_the_solve_stops_early_enough_for_motion(monkeypatch: pytest.MonkeyPatch
     out = plan_paths(req, DispatchPolicy(), GeometrySettings(), deadline=due, reserve=reserve)
     assert seen["deadline"] == pytest.approx(due - 0.5)
     # Motion of a few robots takes milliseconds: the rate came down a fifth of the way.
-    observed = out.timings.motion_s / units
+    observed = (out.response.timings.motion_s + out.encode_s) / units
     assert observed < 0.5 / units
     assert reserve.seconds_per_unit == pytest.approx(0.5 / units + 0.2 * (observed - 0.5 / units))
 
@@ -107,4 +108,19 @@ def test_a_reserve_past_the_deadline_still_leaves_the_solve_its_least_time(
     reserve = MotionReserve(seconds_per_unit=1.0)  # seconds per unit: far past the limit
     out = plan_paths(req, DispatchPolicy(), GeometrySettings(), reserve=reserve)
     assert plan_module.MIN_SOLVE_S - 0.01 <= seen["left"] <= plan_module.MIN_SOLVE_S
-    assert out.checks.collision_free
+    assert out.response.checks.collision_free
+
+
+def test_the_reserve_learns_the_answers_encoding_too() -> None:
+    """What the reserve keeps covers the answer's JSON body, which the route sends as
+    :func:`plan_paths` encoded it."""
+    req = request(SCENARIOS["three_way"](), solver="fcfs", time_limit_s=2.0)
+    problem = derive(req, GeometrySettings()).problem()
+    assert problem is not None
+    units = work_units(problem)
+    reserve = MotionReserve(seconds_per_unit=0.0, base_s=0.0, min_units=0)  # any rate is slower
+    out = plan_paths(req, DispatchPolicy(), GeometrySettings(), reserve=reserve)
+    assert out.encode_s > 0
+    motion_s = out.response.timings.motion_s
+    assert reserve.seconds_per_unit == pytest.approx((motion_s + out.encode_s) / units)
+    assert json.loads(out.content) == out.response.model_dump(mode="json", by_alias=True)

@@ -39,7 +39,7 @@ def _answer(kind: str, n_robots: int, seed: int, solver: str):
         )
         req = PathsRequest.model_validate(body)
         try:
-            return req, plan_paths(req, DispatchPolicy(models=MODELS), GeometrySettings())
+            return req, plan_paths(req, DispatchPolicy(models=MODELS), GeometrySettings()).response
         except ProblemError:
             continue
     return req, None

@@ -105,7 +105,7 @@ def request(
 
 def plan(req: PathsRequest) -> PathsScheduleResponse:
     """``plan_paths`` with the default policy and geometry."""
-    return plan_paths(req, DispatchPolicy(), GeometrySettings())
+    return plan_paths(req, DispatchPolicy(), GeometrySettings()).response
 
 
 def paths_of(req: PathsRequest) -> list[RobotPath]:

@@ -99,11 +99,11 @@ async def schedule_paths(
         geometry_settings(settings),
         deadline=record.arrival + time_limit_s,
     )
-    response, content = await run_paths_work(with_json(work), runtime.limiter, record)
-    metrics.observe_problem(len(body.robots), len(response.assignment))
-    metrics.observe_solve(response)
-    note_answer(record, response)
-    return json_response(content)
+    answer = await run_paths_work(work, runtime.limiter, record)
+    metrics.observe_problem(len(body.robots), len(answer.response.assignment))
+    metrics.observe_solve(answer.response)
+    note_answer(record, answer.response)
+    return json_response(answer.content)
 
 
 def note_problem(record: RequestRecord, body: ScheduleRequest) -> None:
