@@ -16,6 +16,11 @@ For a conflict between robots i (side a) and j (side b) decided "i first":
 
 "j first" swaps the roles. Either way the pair stays out of every box's interior,
 which is what keeps the disks apart (docs/paths.md).
+
+A plan then drops the constraints that others imply through a third robot
+(:func:`without_implied`): robots in one aisle wait for everyone ahead of them, but
+waiting for the one in front implies the rest. On 250-robot warehouses that keeps a
+tenth of the constraints, and execution, the answer and its encoding shrink with them.
 """
 
 from __future__ import annotations
@@ -28,7 +33,16 @@ import numpy as np
 from service.geometry.graph import CoordinationGraph
 from service.simulation.executor import DependencyPlan
 
-__all__ = ["STAIRCASE_STEP_M", "Decision", "dependency_plan", "sections", "staircase", "thin"]
+__all__ = [
+    "IMPLIED_TOL_M",
+    "STAIRCASE_STEP_M",
+    "Decision",
+    "dependency_plan",
+    "sections",
+    "staircase",
+    "thin",
+    "without_implied",
+]
 
 # Least distance, metres, between two wait points of one following conflict: a follower
 # then trails at most this much further behind than it must, and a 250-robot plan keeps
@@ -42,6 +56,10 @@ STAIRCASE_STEP_M = 0.75
 # Most wait points one following conflict keeps: a shared stretch longer than this many
 # steps gets longer steps (a kilometre-long corridor must not cost 10^3+ events).
 MAX_STEPS = 100
+# How far, metres, a robot must be past a wait point of its own for the constraint there
+# to count as satisfied in a chain (:func:`without_implied`): rounding never makes a
+# robot standing at its wait point count as past it.
+IMPLIED_TOL_M = 1e-6
 
 
 @dataclass(frozen=True, eq=False)
@@ -196,3 +214,73 @@ def dependency_plan(graph: CoordinationGraph, decision: Decision) -> DependencyP
         STAIRCASE_STEP_M,
     )
     return DependencyPlan(waiter.astype(np.int64), wait, waitee.astype(np.int64), until)
+
+
+@numba.njit(cache=True, nogil=True)
+def _implied_kernel(
+    start: np.ndarray,  # (R+1,) int, each waiter's constraints, sorted by wait point
+    wait: np.ndarray,  # (D,) float
+    waitee: np.ndarray,  # (D,) int
+    until: np.ndarray,  # (D,) float
+    tol: float,
+) -> np.ndarray:  # (D,) bool, the constraints kept
+    n = start.size - 1
+    keep = np.ones(wait.size, dtype=np.bool_)
+    reached = np.full(n, -np.inf)  # per robot k: how far i knows k is when passing w
+    read = start[:-1].copy()  # per k: k's own constraints with wait < reached[k] end here
+    known = np.full(n, -np.inf)  # per robot j: how far i knows j is, through one k
+    touched_k = np.empty(n, dtype=np.int64)
+    touched_j = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        n_k = n_j = 0
+        d = start[i]
+        while d < start[i + 1]:  # one wait point of i at a time
+            end = d
+            while end < start[i + 1] and wait[end] == wait[d]:
+                k = waitee[end]
+                if until[end] > reached[k]:
+                    if reached[k] == -np.inf:
+                        touched_k[n_k] = k
+                        n_k += 1
+                    reached[k] = until[end]
+                    p = read[k]  # k is past these wait points: their waitees are as far
+                    while p < start[k + 1] and wait[p] + tol < reached[k]:
+                        j = waitee[p]
+                        if j != i:
+                            if known[j] == -np.inf:
+                                touched_j[n_j] = j
+                                n_j += 1
+                            known[j] = max(known[j], until[p])
+                        p += 1
+                    read[k] = p
+                end += 1
+            for e in range(d, end):
+                keep[e] = known[waitee[e]] < until[e]
+            d = end
+        for t in range(n_k):
+            reached[touched_k[t]] = -np.inf
+            read[touched_k[t]] = start[touched_k[t]]
+        for t in range(n_j):
+            known[touched_j[t]] = -np.inf
+    return keep
+
+
+def without_implied(plan: DependencyPlan, n_robots: int) -> DependencyPlan:
+    """``plan`` less each constraint that two others imply through a third robot.
+
+    "i may not pass w until j reached u" is implied by "i may not pass w1 <= w until k
+    reached u1" and "k may not pass w2 < u1 until j reached u2 >= u": when i passes w,
+    k is past w2 (strictly, by IMPLIED_TOL_M), so j is at u2 or beyond. Removed together,
+    the constraints still imply each other along chains that end in kept ones as long as
+    the plan never deadlocks, which plans of acyclic schedules never do (docs/paths.md);
+    the run is then the same. Every constraint must still be ahead of its waiter (none
+    already passed, as in a re-schedule's): a passed wait point proves nothing of its
+    waitee. Shapes: D constraints -> D' <= D, sorted by waiter and wait point.
+    """
+    order = np.lexsort((plan.wait_s, plan.waiter))  # (D,)
+    waiter, wait, waitee, until = (
+        a[order] for a in (plan.waiter, plan.wait_s, plan.waitee, plan.until_s)
+    )
+    start = np.searchsorted(waiter, np.arange(n_robots + 1))  # (R+1,)
+    keep = _implied_kernel(start, wait, waitee, until, IMPLIED_TOL_M)  # (D,)
+    return DependencyPlan(waiter[keep], wait[keep], waitee[keep], until[keep])

@@ -37,7 +37,7 @@ from service.core.schemas import (
 )
 from service.geometry.graph import CoordinationGraph, GeometrySettings, build_graph
 from service.geometry.paths import RobotPath
-from service.motion.dependencies import Decision, dependency_plan
+from service.motion.dependencies import Decision, dependency_plan, without_implied
 from service.motion.progress import progress_at, state_of
 from service.motion.reserve import MotionReserve, work_units
 from service.motion.trajectories import departure_times, realized_costs, trajectories
@@ -95,7 +95,7 @@ class _Executed:
     """A decision that executed without deadlock and passed the clearance check."""
 
     decision: Decision
-    plan: DependencyPlan
+    plan: DependencyPlan  # the constraints ahead (of a re-schedule's state), none implied
     run: Run
     trajectories: list[Trajectory]
     clearance: Clearance
@@ -218,7 +218,9 @@ def _execute_safely(graph: CoordinationGraph, decision: Decision, state: State |
     """Execute ``decision`` (from ``state`` on, for a re-schedule), or its all-exclusive
     version, whichever first runs clean."""
     for candidate in (decision, decision.exclusive()):
-        plan = dependency_plan(graph, candidate)
+        # The constraints still ahead, without those others imply: what is run and sent.
+        ahead = _ahead(graph.paths, dependency_plan(graph, candidate), state)
+        plan = without_implied(ahead, len(graph.paths))
         if state is None:
             run = execute(graph.paths, plan)
         else:
@@ -297,7 +299,7 @@ def _render(
             )
             for path, tr in zip(paths, executed.trajectories, strict=True)
         ],
-        dependencies=plan_to_wire(paths, _ahead(paths, executed.plan, state)),
+        dependencies=plan_to_wire(paths, executed.plan),
         timings=TimingsOut(graph_s=0.0, solve_s=solve_s, motion_s=0.0),  # set by the caller
     )
 

@@ -16,8 +16,17 @@ from hypothesis import strategies as st
 
 from service.core.problem import ProblemError
 from service.geometry.graph import CoordinationGraph, GeometrySettings, build_graph
-from service.motion.dependencies import Decision, dependency_plan, staircase
-from service.simulation.executor import DependencyPlan
+from service.geometry.paths import RobotPath
+from service.motion.dependencies import (
+    IMPLIED_TOL_M,
+    Decision,
+    dependency_plan,
+    staircase,
+    without_implied,
+)
+from service.motion.trajectories import departure_times
+from service.simulation.disturbances import Rate
+from service.simulation.executor import DependencyPlan, Run, execute, on_clock
 from tests.motion.worlds import fleets, paths_of, request, robot
 
 
@@ -105,3 +114,160 @@ def test_no_conflict_gives_an_empty_plan() -> None:
     graph = build_graph(paths_of(request(robots)), GeometrySettings())
     empty = np.zeros(0, dtype=bool)
     assert dependency_plan(graph, Decision(empty, empty)).size == 0
+
+
+def _plan(*rows: tuple[int, float, int, float]) -> DependencyPlan:
+    """A plan of (waiter, wait_s, waitee, until_s) rows."""
+    waiter, wait, waitee, until = (np.array(c) for c in zip(*rows, strict=True))
+    return DependencyPlan(waiter.astype(np.int64), wait, waitee.astype(np.int64), until)
+
+
+def _rows(plan: DependencyPlan) -> set[tuple[int, float, int, float]]:
+    return set(
+        zip(
+            plan.waiter.tolist(),
+            plan.wait_s.tolist(),
+            plan.waitee.tolist(),
+            plan.until_s.tolist(),
+            strict=True,
+        )
+    )
+
+
+def test_a_constraint_implied_through_a_third_robot_goes() -> None:
+    """0 waits at 1 for 1 to reach 3; 1 waits at 2 for 2 to reach 5: when 0 passes 1,
+    robot 1 is past 2, so 2 is at 5 or beyond, and "0 waits at 1.5 for 2 to reach 4"
+    says nothing more."""
+    chain = [(0, 1.0, 1, 3.0), (1, 2.0, 2, 5.0)]
+    assert _rows(without_implied(_plan(*chain, (0, 1.5, 2, 4.0)), 3)) == set(chain)
+    # Not implied: 2 must go farther, 0 waits earlier, or 1 is only at its wait point.
+    for extra in [(0, 1.5, 2, 5.5), (0, 0.5, 2, 4.0)]:
+        assert _rows(without_implied(_plan(*chain, extra), 3)) == {*chain, extra}
+    at_wait = [(0, 1.0, 1, 2.0), (1, 2.0, 2, 5.0), (0, 1.5, 2, 4.0)]
+    assert _rows(without_implied(_plan(*at_wait), 3)) == set(at_wait)
+    nearly = [(0, 1.0, 1, 2.0 + IMPLIED_TOL_M / 2), (1, 2.0, 2, 5.0), (0, 1.5, 2, 4.0)]
+    assert _rows(without_implied(_plan(*nearly), 3)) == set(nearly)
+
+
+def _implied_by_brute_force(rows: list[tuple[int, float, int, float]]) -> set[int]:
+    """Indices of the rows that two others imply through a third robot (by definition)."""
+    return {
+        c
+        for c, (i, w, j, u) in enumerate(rows)
+        if any(
+            i1 == i and w1 <= w and k != j and i2 == k and w2 + IMPLIED_TOL_M < u1 and u2 >= u
+            for i1, w1, k, u1 in rows
+            for i2, w2, j2, u2 in rows
+            if j2 == j
+        )
+    }
+
+
+arc = st.one_of(st.integers(0, 8).map(lambda v: v / 2), st.floats(0.0, 4.0))  # ties, and not
+constraint_rows = st.lists(
+    st.tuples(st.integers(0, 3), arc, st.integers(0, 3), arc).filter(lambda r: r[0] != r[2]),
+    min_size=1,
+    max_size=14,
+    unique=True,
+)
+
+
+@settings(max_examples=300, deadline=None, derandomize=True)
+@given(rows=constraint_rows)
+def test_exactly_the_constraints_implied_through_a_third_robot_go(
+    rows: list[tuple[int, float, int, float]],
+) -> None:
+    """On any plan (arc lengths often on a grid, so that ties occur), the kept constraints are
+    those not implied by two others (any plan: this test is of the definition alone)."""
+    implied = _implied_by_brute_force(rows)
+    kept = without_implied(_plan(*rows), 4)
+    assert _rows(kept) == {r for c, r in enumerate(rows) if c not in implied}
+
+
+def _same_run(a: Run, b: Run) -> bool:
+    return (
+        a.deadlocked == b.deadlocked
+        and np.allclose(a.completion, b.completion, rtol=0, atol=1e-9, equal_nan=True)
+        and all(
+            np.allclose(np.interp(t, wa, ca), np.interp(t, wb, cb), rtol=0, atol=1e-9)
+            for wa, ca, wb, cb in zip(a.wall, a.clock, b.wall, b.clock, strict=True)
+            for t in [np.union1d(wa, wb)]
+        )
+    )
+
+
+def _aisle(speeds: list[float], starts: list[float]) -> list[dict[str, Any]]:
+    """Robots along one aisle, all one way, each from its own place and time."""
+    return [
+        robot(f"r{k}", [[1.0 * k, 0.0], [12.0 + 1.0 * k, 0.0]], speed=v, start_time=t)
+        for k, (v, t) in enumerate(zip(speeds, starts, strict=True))
+    ]
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(
+    robots=st.one_of(
+        fleets(max_robots=6, side=6.0),
+        st.integers(3, 6).flatmap(
+            lambda n: st.builds(
+                _aisle,
+                st.lists(st.floats(0.3, 2.0), min_size=n, max_size=n),
+                st.lists(st.floats(0.0, 4.0), min_size=n, max_size=n),
+            )
+        ),
+    ),
+    data=st.data(),
+)
+def test_a_plan_without_implied_constraints_runs_the_same(
+    robots: list[dict[str, Any]], data: st.DataObject
+) -> None:
+    """Any decision whose plan never deadlocks (as no acyclic schedule's does) runs the
+    same without the constraints its others imply, and obeys them all however late its
+    robots run."""
+    try:
+        graph = build_graph(paths_of(request(robots)), GeometrySettings())
+    except ProblemError:
+        return
+    m = graph.n_conflicts
+    flags = st.lists(st.booleans(), min_size=m, max_size=m)
+    decision = Decision(np.array(data.draw(flags), bool), np.array(data.draw(flags), bool))
+    plan = dependency_plan(graph, decision)
+    run = execute(graph.paths, plan)
+    if run.deadlocked:
+        return
+    kept = without_implied(plan, len(graph.paths))
+    assert _rows(kept) <= _rows(plan)
+    assert _same_run(execute(graph.paths, kept), run)
+    stop = st.tuples(st.floats(0.0, 20.0), st.floats(0.1, 5.0), st.sampled_from([0.0, 0.3]))
+    rates = [Rate.of(data.draw(st.lists(stop, max_size=2))) for _ in graph.paths]
+    late = execute(graph.paths, kept, rates)
+    if not late.deadlocked:
+        assert_obeyed(graph.paths, late, plan)
+
+
+def assert_obeyed(paths: list[RobotPath], run: Run, plan: DependencyPlan) -> None:
+    """In ``run``, no robot left a wait point of ``plan`` before its waitee got there."""
+    wait_clock = on_clock(paths, plan.waiter, plan.wait_s)  # (D,)
+    until_clock = on_clock(paths, plan.waitee, plan.until_s)  # (D,)
+    for d in range(plan.size):
+        i, j = int(plan.waiter[d]), int(plan.waitee[d])
+        left = departure_times(run.wall[i], run.clock[i], wait_clock[d : d + 1])[0]
+        wall, clock = run.wall[j], run.clock[j]
+        first = int(np.searchsorted(clock, until_clock[d]))  # first waypoint there or past
+        reached = wall[0]
+        if first > 0:  # between two waypoints: where j's clock crosses the point
+            c0, c1, w0, w1 = clock[first - 1], clock[first], wall[first - 1], wall[first]
+            reached = w0 + (until_clock[d] - c0) / (c1 - c0) * (w1 - w0)
+        assert left >= reached - 1e-9, f"constraint {d} broken"
+
+
+def test_an_aisle_waits_only_for_the_robot_in_front() -> None:
+    """Six robots in a row, each following the one ahead: each keeps its constraints on
+    the robot in front only, and the run is the same."""
+    graph = build_graph(paths_of(request(_aisle([1.0] * 6, [0.0] * 6))), GeometrySettings())
+    ahead = graph.node_robot[graph.conf_node[:, 1]] > graph.node_robot[graph.conf_node[:, 0]]
+    plan = dependency_plan(graph, Decision(~ahead, np.ones(graph.n_conflicts, bool)))
+    kept = without_implied(plan, len(graph.paths))
+    assert set((kept.waitee - kept.waiter).tolist()) == {1}
+    assert kept.size < plan.size
+    assert _same_run(execute(graph.paths, kept), execute(graph.paths, plan))
