@@ -222,16 +222,24 @@ def _implied_kernel(
     wait: np.ndarray,  # (D,) float
     waitee: np.ndarray,  # (D,) int
     until: np.ndarray,  # (D,) float
+    order: np.ndarray,  # (R,) int, the robots in the order they are reduced
     tol: float,
 ) -> np.ndarray:  # (D,) bool, the constraints kept
     n = start.size - 1
     keep = np.ones(wait.size, dtype=np.bool_)
+    # Each robot's list of constraints that may serve as a chain's second link: all of
+    # them, then only those kept once the robot is reduced (copied after the first D).
+    l_wait = np.concatenate((wait, wait))
+    l_waitee = np.concatenate((waitee, waitee))
+    l_until = np.concatenate((until, until))
+    first, last = start[:-1].copy(), start[1:].copy()  # (R,) each robot's list
+    n_items = wait.size
     reached = np.full(n, -np.inf)  # per robot k: how far i knows k is when passing w
-    read = start[:-1].copy()  # per k: k's own constraints with wait < reached[k] end here
+    read = np.zeros(n, dtype=np.int64)  # per k: its list read up to here (wait < reached)
     known = np.full(n, -np.inf)  # per robot j: how far i knows j is, through one k
     touched_k = np.empty(n, dtype=np.int64)
     touched_j = np.empty(n, dtype=np.int64)
-    for i in range(n):
+    for i in order:
         n_k = n_j = 0
         d = start[i]
         while d < start[i + 1]:  # one wait point of i at a time
@@ -242,27 +250,56 @@ def _implied_kernel(
                     if reached[k] == -np.inf:
                         touched_k[n_k] = k
                         n_k += 1
+                        read[k] = first[k]
                     reached[k] = until[end]
-                    p = read[k]  # k is past these wait points: their waitees are as far
-                    while p < start[k + 1] and wait[p] + tol < reached[k]:
-                        j = waitee[p]
+                    q = read[k]  # k is past these wait points: their waitees are as far
+                    while q < last[k] and l_wait[q] + tol < reached[k]:
+                        j = l_waitee[q]
                         if j != i:
                             if known[j] == -np.inf:
                                 touched_j[n_j] = j
                                 n_j += 1
-                            known[j] = max(known[j], until[p])
-                        p += 1
-                    read[k] = p
+                            known[j] = max(known[j], l_until[q])
+                        q += 1
+                    read[k] = q
                 end += 1
             for e in range(d, end):
                 keep[e] = known[waitee[e]] < until[e]
             d = end
         for t in range(n_k):
             reached[touched_k[t]] = -np.inf
-            read[touched_k[t]] = start[touched_k[t]]
         for t in range(n_j):
             known[touched_j[t]] = -np.inf
+        first[i] = n_items  # from now on, chains through i read only what i kept
+        for e in range(start[i], start[i + 1]):
+            if keep[e]:
+                l_wait[n_items], l_waitee[n_items], l_until[n_items] = wait[e], waitee[e], until[e]
+                n_items += 1
+        last[i] = n_items
     return keep
+
+
+@numba.njit(cache=True, nogil=True)
+def _by_waiter_and_point(
+    waiter: np.ndarray,  # (D,) int in [0, R)
+    wait: np.ndarray,  # (D,) float
+    n_robots: int,
+) -> tuple[np.ndarray, np.ndarray]:  # (D,) permutation, (R+1,) each waiter's rows
+    """The rows grouped by waiter (a counting sort), each group by wait point (stable):
+    ``np.lexsort((wait, waiter))`` without its ~60 ms at 437,000 rows."""
+    start = np.zeros(n_robots + 1, dtype=np.int64)
+    for d in range(waiter.size):
+        start[waiter[d] + 1] += 1
+    start = np.cumsum(start)
+    fill = start[:-1].copy()
+    perm = np.empty(waiter.size, dtype=np.int64)
+    for d in range(waiter.size):
+        perm[fill[waiter[d]]] = d
+        fill[waiter[d]] += 1
+    for r in range(n_robots):
+        rows = perm[start[r] : start[r + 1]]
+        perm[start[r] : start[r + 1]] = rows[np.argsort(wait[rows], kind="mergesort")]
+    return perm, start
 
 
 def without_implied(plan: DependencyPlan, n_robots: int) -> DependencyPlan:
@@ -276,11 +313,18 @@ def without_implied(plan: DependencyPlan, n_robots: int) -> DependencyPlan:
     the run is then the same. Every constraint must still be ahead of its waiter (none
     already passed, as in a re-schedule's): a passed wait point proves nothing of its
     waitee. Shapes: D constraints -> D' <= D, sorted by waiter and wait point.
+
+    Robots are reduced in turn, those with the fewest constraints first (the front of a
+    queue), and a chain's second link is read among what its robot kept, once reduced:
+    the queue behind reads one leader's staircase, not everyone's (a one-way warehouse
+    of 250 robots, FCFS: 437,150 constraints, 17,143 kept in ~40 ms, where every second
+    link read keeps 15,268 in ~140 ms). Any subset of second links drops only implied
+    constraints.
     """
-    order = np.lexsort((plan.wait_s, plan.waiter))  # (D,)
+    by_point, start = _by_waiter_and_point(plan.waiter, plan.wait_s, n_robots)  # (D,), (R+1,)
     waiter, wait, waitee, until = (
-        a[order] for a in (plan.waiter, plan.wait_s, plan.waitee, plan.until_s)
+        a[by_point] for a in (plan.waiter, plan.wait_s, plan.waitee, plan.until_s)
     )
-    start = np.searchsorted(waiter, np.arange(n_robots + 1))  # (R+1,)
-    keep = _implied_kernel(start, wait, waitee, until, IMPLIED_TOL_M)  # (D,)
+    order = np.argsort(np.diff(start), kind="stable")  # (R,) fewest constraints first
+    keep = _implied_kernel(start, wait, waitee, until, order, IMPLIED_TOL_M)  # (D,)
     return DependencyPlan(waiter[keep], wait[keep], waitee[keep], until[keep])
