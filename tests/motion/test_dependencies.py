@@ -93,18 +93,27 @@ def assert_boxes_guarded(graph: CoordinationGraph, decision: Decision) -> None:
             assert np.all(wait >= lo - 1e-12) and np.all(until <= hi + 1e-12)
 
 
+def _graph_and_decision(
+    robots: list[dict[str, Any]], data: st.DataObject
+) -> tuple[CoordinationGraph, Decision] | None:
+    """The fleet's graph and a random decision of its conflicts (None: paths refused)."""
+    try:
+        graph = build_graph(paths_of(request(robots)), GeometrySettings())
+    except ProblemError:
+        return None
+    flags = st.lists(st.booleans(), min_size=graph.n_conflicts, max_size=graph.n_conflicts)
+    return graph, Decision(np.array(data.draw(flags), bool), np.array(data.draw(flags), bool))
+
+
 @settings(max_examples=30, deadline=None, derandomize=True)
 @given(robots=fleets(max_robots=5, side=8.0), data=st.data())
 def test_every_box_is_guarded_for_any_decision(
     robots: list[dict[str, Any]], data: st.DataObject
 ) -> None:
-    try:
-        graph = build_graph(paths_of(request(robots)), GeometrySettings())
-    except ProblemError:
+    drawn = _graph_and_decision(robots, data)
+    if drawn is None:
         return
-    m = graph.n_conflicts
-    flags = st.lists(st.booleans(), min_size=m, max_size=m)
-    decision = Decision(np.array(data.draw(flags), bool), np.array(data.draw(flags), bool))
+    graph, decision = drawn
     assert_boxes_guarded(graph, decision)
     assert_boxes_guarded(graph, decision.exclusive())
 
@@ -246,13 +255,10 @@ def test_a_plan_without_implied_constraints_runs_the_same(
     """Any decision whose plan never deadlocks (as no acyclic schedule's does) runs the
     same without the constraints its others imply, and obeys them all however late its
     robots run."""
-    try:
-        graph = build_graph(paths_of(request(robots)), GeometrySettings())
-    except ProblemError:
+    drawn = _graph_and_decision(robots, data)
+    if drawn is None:
         return
-    m = graph.n_conflicts
-    flags = st.lists(st.booleans(), min_size=m, max_size=m)
-    decision = Decision(np.array(data.draw(flags), bool), np.array(data.draw(flags), bool))
+    graph, decision = drawn
     plan = dependency_plan(graph, decision)
     run = execute(graph.paths, plan)
     if run.deadlocked:
