@@ -1,10 +1,10 @@
 """The time a paths-form answer keeps for its motion, learned from the answers made.
 
 After the solve, a paths-form answer still executes the plan, checks clearance,
-builds its trajectories and dependencies and encodes the answer as JSON (since
-session 62: before, the encoding, ~0.08 s at 250 robots, was left to the margin and
-1-s requests of 250 robots ended at up to 1.25 s): no solver can cut that short, so the solve
-must stop early enough for it to fit in the request's time limit. A fixed share of the
+builds its trajectories and dependencies and encodes the answer as JSON (the encoding
+since session 62: left to the margin before, ~0.08 s at 250 robots, it took a fresh
+process's first 1-s request of 250 robots to 1.25 s): no solver can cut that short,
+so the solve must stop early enough for it to fit in the request's time limit. A fixed share of the
 limit (10 % until session 32) left 1-s requests of 250 robots 1.09-1.47 s end to end
 (motion 0.17-0.41 s), and how long motion takes depends on the machine and the hour as
 much as on the problem (the same worlds: 0.15-0.21 s on a 2-vCPU EPYC, 0.17-0.49 s on a
