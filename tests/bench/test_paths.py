@@ -21,12 +21,19 @@ from bench.paths import (
     failures,
     finish_rows,
     main,
+    model_cost,
     solvers_for,
     summarize,
 )
 from bench.report import config_from_args
+from service.core.path_schemas import PathsRequest
 from service.core.schemas import SolverName
+from service.geometry.graph import GeometrySettings
+from service.motion.plan import plan_paths
 from service.scenarios import generate
+from service.solvers.dispatch import DispatchPolicy
+from tests.motion.scenarios import SCENARIOS
+from tests.motion.worlds import request
 
 
 def _case(ref: dict | None) -> WorldCase:
@@ -40,6 +47,7 @@ def _ok(cost: float, solver_used: str = "exact", clear: bool = True) -> dict:
         "motion_s": 0.05, "cost": cost, "conflicts": 3, "solver_used": solver_used,
         "fallback_from": None, "optimal": False, "detail": None, "collision_free": clear,
         "min_clearance_m": 0.05 if clear else -0.1, "replay_collision_free": clear,
+        "model_cost": 9.5,
     }  # fmt: skip
 
 
@@ -49,6 +57,7 @@ def test_rows_measure_against_the_best_executed_cost() -> None:
     assert fcfs["ref_cost"] == 9.0 and fcfs["ref_source"] == "tabu"
     assert fcfs["ratio"] == pytest.approx(9.0 / 12.0)
     assert fcfs["delay_ratio"] == pytest.approx((9.0 - 8.0) / (12.0 - 8.0))
+    assert fcfs["model_gap"] == pytest.approx(12.0 / 9.5)
     assert tabu["reached_ref"] and not fcfs["reached_ref"]
     assert fcfs["overhead_s"] == pytest.approx(0.15)
     assert fcfs["render_s"] == pytest.approx(0.05)
@@ -109,3 +118,12 @@ def test_quick_run_writes_everything_and_never_collides(tmp_path: Path) -> None:
 def test_every_solver_runs_once_by_default() -> None:
     """The default run lists every solver the service has, ``auto`` among them, once."""
     assert sorted(SOLVERS) == sorted(set(get_args(SolverName)))
+
+
+def test_the_model_cost_is_the_executed_one_where_every_conflict_is_a_crossing() -> None:
+    """Crossings are exclusive with one meeting place each: execution then reproduces the
+    evaluator's times exactly (docs/paths.md), so the model's cost is the executed one."""
+    req: PathsRequest = request(SCENARIOS["intersection"](), solver="exact", time_limit_s=5.0)
+    answer = plan_paths(req, DispatchPolicy(), GeometrySettings()).response
+    assert answer.assignment and all(row["type"] == "exclusive" for row in answer.assignment)
+    assert model_cost(req, answer) == pytest.approx(answer.cost, rel=1e-9)
