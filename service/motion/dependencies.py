@@ -83,10 +83,12 @@ def staircase(until: np.ndarray, wait: np.ndarray) -> tuple[np.ndarray, np.ndarr
     a non-decreasing step function; one constraint per step is kept.
     """
     # Sort by until, ties by descending wait (the least wait last, so only it is kept):
-    # two stable sorts, as numba has no lexsort.
-    by_wait = np.argsort(-wait, kind="mergesort")
-    order = by_wait[np.argsort(until[by_wait], kind="mergesort")]
-    until, wait = until[order], wait[order]
+    # two stable sorts, as numba has no lexsort; none where the boxes of a corridor come
+    # in order already (until strictly ascending, as most do).
+    if np.any(until[1:] <= until[:-1]):
+        by_wait = np.argsort(-wait, kind="mergesort")
+        order = by_wait[np.argsort(until[by_wait], kind="mergesort")]
+        until, wait = until[order], wait[order]
     least = wait.copy()  # least wait from k on
     for k in range(least.size - 2, -1, -1):
         least[k] = min(least[k], least[k + 1])
