@@ -72,6 +72,7 @@ from service.geometry.paths import RobotPath
 from service.learning.store import load_all
 from service.memory import settle
 from service.motion.plan import derive, plan_paths
+from service.motion.replan import decision
 from service.scenarios import KINDS, World, generate
 from service.simulation.clearance import Trajectory, check_clearance
 from service.solvers.dispatch import DispatchPolicy
@@ -231,11 +232,10 @@ def model_cost(request: PathsRequest, answer: PathsScheduleResponse) -> float:
     completion = np.array([p.finish_time for p in graph.paths])  # (R,)
     problem = graph.problem()
     if problem is not None:
-        ids = graph.node_ids()
-        side_a = graph.conf_node[:, 0].tolist()  # (M,) answers come in the graph's order
-        a_first = [row["from"] == ids[a] for row, a in zip(answer.assignment, side_a, strict=True)]
-        following = [row["type"] == "following" for row in answer.assignment]
-        evaluation = Evaluator(problem).evaluate(Assignments.single(a_first, following))
+        decided = decision(graph, answer)
+        evaluation = Evaluator(problem).evaluate(
+            Assignments.single(decided.a_first, decided.following)
+        )
         completion[graph.robots_in_graph()] = evaluation.completion[0]
     costs = costs_from_completion(completion[None, :])
     return float(costs[request.objective][0]) if request.objective in costs else float("nan")

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from pydantic import TypeAdapter
 
+from service.core.path_schemas import PathsScheduleResponse
 from service.core.problem import ProblemError
 from service.core.schemas import (
     PreviousConflictIn,
@@ -66,8 +67,11 @@ def previous_of(answer: ScheduleResponse) -> list[PreviousConflictIn]:
     return _PREVIOUS.validate_python(answer.assignment)
 
 
-def decision(graph: CoordinationGraph, answer: ScheduleResponse) -> Decision:
-    """A graph-form answer's assignment (in the graph's conflict order) as arrays."""
+def decision(
+    graph: CoordinationGraph, answer: ScheduleResponse | PathsScheduleResponse
+) -> Decision:
+    """An answer's assignment (in the graph's conflict order) as arrays: a graph-form
+    answer to the graph's request, or the paths-form answer it was derived in."""
     ids = graph.node_ids()
     a_first = np.array(
         [
