@@ -27,10 +27,8 @@ arcs: 1.6 ms for those 8 when each is one robot's priority shift.
 
 from __future__ import annotations
 
-import os
-import threading
+import itertools
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numba
@@ -39,6 +37,7 @@ import numpy as np
 from service.core.assignment import Assignments
 from service.core.problem import Problem
 from service.core.schemas import OBJECTIVES, Objective
+from service.core.threads import in_parts
 
 __all__ = [
     "MONOTONE_OBJECTIVES",
@@ -63,21 +62,6 @@ CYCLIC, WALKED_FORWARD, WALKED_BOTH = 0, 1, 2
 # size (and as much again absolute), so that the kernel's sum, added in another order
 # than the cost's, skips the latest only of answers that the cost finds not cheaper.
 SUM_MARGIN = 1e-9
-
-# Threads that walk other threads' shares of a batch: one pool per process (rebuilt in a
-# forked child, which inherits the pool but not its threads); the kernel releases the GIL.
-_pool: tuple[int, ThreadPoolExecutor] | None = None
-_pool_lock = threading.Lock()
-
-
-def _shared_pool() -> ThreadPoolExecutor:
-    """This process's walking pool (threads are started on demand, up to the core count)."""
-    global _pool
-    with _pool_lock:
-        if _pool is None or _pool[0] != os.getpid():
-            pool = ThreadPoolExecutor(os.cpu_count(), thread_name_prefix="evaluate")
-            _pool = (os.getpid(), pool)
-        return _pool[1]
 
 
 @dataclass(frozen=True, eq=False)
@@ -635,10 +619,8 @@ class Evaluator:
         if shares <= 1:
             return walk(slice(0, n_samples))
         bounds = np.linspace(0, n_samples, shares + 1).astype(np.int64)  # (shares+1,)
-        rows = [slice(lo, hi) for lo, hi in zip(bounds[:-1], bounds[1:], strict=True)]
-        others = [_shared_pool().submit(walk, r) for r in rows[1:]]
-        first = walk(rows[0])
-        return np.concatenate([first, *(f.result() for f in others)])
+        rows = [slice(lo, hi) for lo, hi in itertools.pairwise(bounds.tolist())]
+        return np.concatenate(in_parts(walk, rows))
 
     def binding(
         self, assignments: Assignments, evaluation: Evaluation, sample: int = 0

@@ -13,12 +13,16 @@ import math
 from typing import Any
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from service.core.path_schemas import PathsRequest
+from service.geometry import interference
 from service.geometry.graph import GeometrySettings
-from service.geometry.interference import COARSE_PIECE_M, Boxes, interference_boxes
+from service.geometry.interference import COARSE_PIECE_M, Boxes, Segments, interference_boxes
 from service.geometry.paths import RobotPath
+from service.scenarios import generate
 from tests.motion.worlds import fleets, paths_of, request, robot
 
 SETTINGS = GeometrySettings()
@@ -161,3 +165,61 @@ def test_boxes_on_side_i_are_fine_where_reach_begins_and_ends_coarse_between() -
     np.testing.assert_allclose(pieces[0, 0], 0.0)
     np.testing.assert_allclose(pieces[-1, 1], 10.0)
     np.testing.assert_allclose(pieces[1:, 0], pieces[:-1, 1])
+
+
+@pytest.mark.parametrize("parts", [2, 3, 7])
+def test_boxes_are_the_same_however_the_narrow_phase_is_cut(
+    parts: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The narrow phase run in parts on threads gives the boxes of one run, in order."""
+    paths = paths_of(PathsRequest.model_validate(generate("wh_two_way", 25, 3).to_request()))
+    whole = _boxes(paths)
+    monkeypatch.setattr(interference, "parts_for", lambda work, least: parts)
+    cut = _boxes(paths)
+    for field in Boxes.__dataclass_fields__:
+        np.testing.assert_array_equal(getattr(cut, field), getattr(whole, field), err_msg=field)
+
+
+@settings(max_examples=15, deadline=None, derandomize=True)
+@given(robots=fleets(min_robots=2, max_robots=5), parts=st.integers(2, 6))
+def test_random_fleets_cut_in_parts_give_the_same_boxes(
+    robots: list[dict[str, Any]], parts: int
+) -> None:
+    """Parts that are empty or hold a single segment's candidates change nothing either."""
+    paths = paths_of(request(robots))
+    whole = _boxes(paths)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(interference, "parts_for", lambda work, least: parts)
+        cut = _boxes(paths)
+    for field in Boxes.__dataclass_fields__:
+        np.testing.assert_array_equal(getattr(cut, field), getattr(whole, field), err_msg=field)
+
+
+@settings(max_examples=40, deadline=None, derandomize=True)
+@given(robots=fleets(min_robots=1, max_robots=5), extra=st.integers(0, 4))
+def test_segments_are_each_paths_straight_runs(robots: list[dict[str, Any]], extra: int) -> None:
+    """Per robot, the segments run along its path from end to end, each path point lies
+    on the segment it falls in, and no segment goes on straight into the next (points
+    added inside the paths' segments change nothing)."""
+    for r in robots:  # ``extra`` points evenly inside every segment of the path
+        pts = np.asarray(r["path"], dtype=float)
+        f = np.linspace(0.0, 1.0, extra + 2)[:-1]
+        inner = pts[:-1, None, :] + f[None, :, None] * np.diff(pts, axis=0)[:, None, :]
+        r["path"] = np.concatenate([inner.reshape(-1, 2), pts[-1:]]).tolist()
+        r.pop("times", None)
+        r.setdefault("speed", 1.0)
+    paths = paths_of(request(robots))
+    segs = Segments.of(paths)
+    for k, path in enumerate(paths):
+        mine = np.flatnonzero(segs.robot == k)
+        assert mine.size >= 1 and np.all(np.diff(mine) == 1)
+        s0, length, p0, p1 = segs.s0[mine], segs.length[mine], segs.p0[mine], segs.p1[mine]
+        assert s0[0] == 0.0 and s0[-1] + length[-1] == pytest.approx(path.length, abs=1e-9)
+        np.testing.assert_allclose(s0[1:], s0[:-1] + length[:-1], atol=1e-9)
+        np.testing.assert_array_equal(p1[:-1], p0[1:])
+        on = np.searchsorted(s0, path.arc, side="right") - 1  # (N,) segment of each point
+        f = np.clip((path.arc - s0[on]) / length[on], 0.0, 1.0)[:, None]
+        np.testing.assert_allclose(p0[on] + f * (p1[on] - p0[on]), path.points, atol=1e-6)
+        heading = (p1 - p0) / length[:, None]
+        same = np.einsum("kd,kd->k", heading[:-1], heading[1:]) > 1.0 - 1e-12
+        assert not np.any(same), "a straight run split in two"

@@ -1,0 +1,70 @@
+"""Worker threads for numba kernels that release the GIL: one pool per process.
+
+A kernel compiled with ``nogil=True`` runs on its own core when called from another
+thread. Callers cut their work into parts (:func:`balanced_cuts`), run the first part
+themselves and the others on the shared pool (:func:`in_parts`), and join the results
+in order: on this 2-core machine a 100-ms kernel then takes ~55 ms while the machine is
+otherwise idle, and no longer than before when it is not.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from typing import TypeVar
+
+import numpy as np
+
+__all__ = ["balanced_cuts", "in_parts", "parts_for", "shared_pool"]
+
+A = TypeVar("A")
+T = TypeVar("T")
+
+# The pool of this process (rebuilt in a forked child, which inherits the pool but not
+# its threads), and the lock that guards building it.
+_pool: tuple[int, ThreadPoolExecutor] | None = None
+_pool_lock = threading.Lock()
+
+
+def shared_pool() -> ThreadPoolExecutor:
+    """This process's pool (threads are started on demand, up to the core count)."""
+    global _pool
+    with _pool_lock:
+        if _pool is None or _pool[0] != os.getpid():
+            pool = ThreadPoolExecutor(os.cpu_count(), thread_name_prefix="kernel")
+            _pool = (os.getpid(), pool)
+        return _pool[1]
+
+
+def parts_for(work: int, least_work: int) -> int:
+    """How many parts ``work`` is worth cutting into: one per core at most, and none
+    smaller than ``least_work`` (below it, handing a part over costs more than it saves)."""
+    return max(1, min(os.cpu_count() or 1, work // max(least_work, 1)))
+
+
+def balanced_cuts(weight: np.ndarray, parts: int, allowed: np.ndarray | None = None) -> list[int]:
+    """Bounds ``[0, c_1, ..., len(weight)]`` of ``parts`` consecutive parts of about equal
+    total ``weight`` (W,), each inner cut at the first ``allowed`` position (sorted
+    indices in (0, W); default every one) at or after its share. Parts may be empty."""
+    size = int(weight.size)
+    if parts <= 1 or size == 0:
+        return [0, size]
+    before = np.concatenate([[0], np.cumsum(weight)])  # (W+1,) weight before each index
+    shares = before[-1] * np.arange(1, parts) / parts  # (parts-1,)
+    ideal = np.searchsorted(before, shares, side="left")  # first index with that much before
+    if allowed is None:
+        inner = ideal
+    else:  # the first allowed position at or after each, or the end
+        ends = np.append(allowed, size)
+        inner = ends[np.searchsorted(allowed, ideal, side="left")]
+    return [0, *np.clip(inner, 0, size).tolist(), size]
+
+
+def in_parts(run: Callable[[A], T], args: Sequence[A]) -> list[T]:
+    """``run`` of each of ``args`` (at least one), in order: the first here, the others on
+    the shared pool at the same time."""
+    others = [shared_pool().submit(run, arg) for arg in args[1:]]
+    first = run(args[0])
+    return [first, *(f.result() for f in others)]
