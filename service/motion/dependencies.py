@@ -25,11 +25,13 @@ tenth of the constraints, and execution, the answer and its encoding shrink with
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numba
 import numpy as np
 
+from service.core.threads import balanced_cuts, in_parts, parts_for
 from service.geometry.graph import CoordinationGraph
 from service.simulation.executor import DependencyPlan
 
@@ -60,6 +62,8 @@ MAX_STEPS = 100
 # to count as satisfied in a chain (:func:`without_implied`): rounding never makes a
 # robot standing at its wait point count as past it.
 IMPLIED_TOL_M = 1e-6
+# Least boxes in a part of a plan made on a thread of its own.
+MIN_PART_BOXES = 100_000
 
 
 @dataclass(frozen=True, eq=False)
@@ -150,22 +154,21 @@ def sections(
 
 @numba.njit(cache=True, nogil=True)
 def _plan_kernel(
-    box_start: np.ndarray,  # (M+1,) int
+    box_start: np.ndarray,  # (M'+1,) int, the boxes of the conflicts planned here
     x0: np.ndarray,  # (B,) float, boxes sorted by conflict
     x1: np.ndarray,
     y0: np.ndarray,
     y1: np.ndarray,
-    robot_a: np.ndarray,  # (M,) int, robot of side a
-    robot_b: np.ndarray,  # (M,) int
-    a_first: np.ndarray,  # (M,) bool
-    following: np.ndarray,  # (M,) bool
+    robot_a: np.ndarray,  # (M',) int, robot of side a
+    robot_b: np.ndarray,  # (M',) int
+    a_first: np.ndarray,  # (M',) bool
+    following: np.ndarray,  # (M',) bool
     step: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # (D,) waiter wait waitee until
-    # At most one constraint per box: preallocate, fill, cut.
-    waiters = np.empty(x0.size, dtype=np.int64)
-    waitees = np.empty(x0.size, dtype=np.int64)
-    waits = np.empty(x0.size)
-    untils = np.empty(x0.size)
+    waiters: np.ndarray,  # (K,) int out, K >= the conflicts' boxes: at most one per box
+    waits: np.ndarray,  # (K,) float out
+    waitees: np.ndarray,  # (K,) int out
+    untils: np.ndarray,  # (K,) float out
+) -> int:  # the constraints written
     n_out = 0
     for m in range(box_start.size - 1):
         lo, hi = box_start[m], box_start[m + 1]
@@ -194,28 +197,44 @@ def _plan_kernel(
             waiters[n_out], waits[n_out] = waiter, wait[k]
             waitees[n_out], untils[n_out] = waitee, until[k]
             n_out += 1
-    return waiters[:n_out], waits[:n_out], waitees[:n_out], untils[:n_out]
+    return n_out
 
 
 def dependency_plan(graph: CoordinationGraph, decision: Decision) -> DependencyPlan:
     """The executor's constraints for ``decision`` on ``graph``."""
     if graph.n_conflicts == 0:
         return DependencyPlan.empty()
-    robot = graph.node_robot[graph.conf_node]  # (M, 2)
-    b = graph.boxes
-    waiter, wait, waitee, until = _plan_kernel(
-        graph.box_start,
-        b.x0,
-        b.x1,
-        b.y0,
-        b.y1,
-        robot[:, 0].astype(np.int64),
-        robot[:, 1].astype(np.int64),
-        decision.a_first.astype(np.bool_),
-        decision.following.astype(np.bool_),
-        STAIRCASE_STEP_M,
+    robot = graph.node_robot[graph.conf_node].astype(np.int64)  # (M, 2)
+    robot_a, robot_b = robot[:, 0].copy(), robot[:, 1].copy()  # (M,) each
+    a_first, following = decision.a_first.astype(np.bool_), decision.following.astype(np.bool_)
+    b, box_start = graph.boxes, graph.box_start
+    # In parts of about equal boxes on threads of their own, each into its own rows of one
+    # buffer (a part's conflicts make at most one constraint per box), joined after.
+    bounds = balanced_cuts(np.diff(box_start), parts_for(b.size, MIN_PART_BOXES))
+    out = (
+        np.empty(b.size, np.int64),
+        np.empty(b.size),
+        np.empty(b.size, np.int64),
+        np.empty(b.size),
     )
-    return DependencyPlan(waiter.astype(np.int64), wait, waitee.astype(np.int64), until)
+
+    def plan(part: tuple[int, int]) -> int:  # the constraints of conflicts lo:hi
+        lo, hi = part
+        rows = slice(box_start[lo], box_start[hi])
+        return _plan_kernel(
+            box_start[lo : hi + 1], b.x0, b.x1, b.y0, b.y1, robot_a[lo:hi], robot_b[lo:hi],
+            a_first[lo:hi], following[lo:hi], STAIRCASE_STEP_M, *(o[rows] for o in out),
+        )  # fmt: skip
+
+    parts = list(itertools.pairwise(bounds))
+    counts = in_parts(plan, parts)
+    waiter, wait, waitee, until = (
+        np.concatenate(
+            [o[box_start[lo] : box_start[lo] + n] for (lo, _), n in zip(parts, counts, strict=True)]
+        )
+        for o in out
+    )
+    return DependencyPlan(waiter, wait, waitee, until)
 
 
 @numba.njit(cache=True, nogil=True)

@@ -11,12 +11,14 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from service.core.problem import ProblemError
 from service.geometry.graph import CoordinationGraph, GeometrySettings, build_graph
 from service.geometry.paths import RobotPath
+from service.motion import dependencies
 from service.motion.dependencies import (
     IMPLIED_TOL_M,
     Decision,
@@ -116,6 +118,25 @@ def test_every_box_is_guarded_for_any_decision(
     graph, decision = drawn
     assert_boxes_guarded(graph, decision)
     assert_boxes_guarded(graph, decision.exclusive())
+
+
+@settings(max_examples=20, deadline=None, derandomize=True)
+@given(robots=fleets(max_robots=5, side=8.0), data=st.data(), parts=st.integers(2, 5))
+def test_a_plan_made_in_parts_is_the_plan_made_whole(
+    robots: list[dict[str, Any]], data: st.DataObject, parts: int
+) -> None:
+    """Conflicts planned in parts on threads give the same constraints in the same order
+    (parts may be empty)."""
+    drawn = _graph_and_decision(robots, data)
+    if drawn is None:
+        return
+    graph, decision = drawn
+    whole = dependency_plan(graph, decision)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(dependencies, "parts_for", lambda work, least: parts)
+        cut = dependency_plan(graph, decision)
+    for field in ("waiter", "wait_s", "waitee", "until_s"):
+        np.testing.assert_array_equal(getattr(cut, field), getattr(whole, field), err_msg=field)
 
 
 def test_no_conflict_gives_an_empty_plan() -> None:
