@@ -7,8 +7,11 @@ the planned clock and to the plane.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from itertools import chain
 
+import numba
 import numpy as np
 
 from service.core.path_schemas import PathRobotIn
@@ -37,6 +40,30 @@ class RobotPath:
             assert robot.speed is not None  # the wire model guarantees one timing
             times = (robot.start_time or 0.0) + arc / robot.speed
         return cls(robot.id, points, arc, times, float(robot.radius))
+
+    @classmethod
+    def all_from_wire(cls, robots: Sequence[PathRobotIn]) -> list[RobotPath]:
+        """:meth:`from_wire` of every robot, the same arrays to the bit, built in bulk: one
+        conversion of all points and one pass for all arc lengths, where robot by robot
+        250 robots of 100 points took 10-20 ms."""
+        if not robots:
+            return []
+        counts = np.array([len(r.path) for r in robots])  # (R,)
+        ends = np.cumsum(counts)  # (R,)
+        # (N, 2): from a flat iterator of floats (np.array of the point tuples is 4x slower)
+        xy = chain.from_iterable(chain.from_iterable(r.path for r in robots))
+        points = np.fromiter(xy, dtype=np.float64).reshape(-1, 2)
+        steps = np.linalg.norm(np.diff(points, axis=0), axis=1)  # (N-1,), across robots too
+        arcs = np.split(_arcs(steps, ends), ends[:-1])
+        out = []
+        for robot, pts, arc in zip(robots, np.split(points, ends[:-1]), arcs, strict=True):
+            if robot.times is not None:
+                times = np.asarray(robot.times, dtype=np.float64)
+            else:
+                assert robot.speed is not None  # the wire model guarantees one timing
+                times = (robot.start_time or 0.0) + arc / robot.speed
+            out.append(cls(robot.id, pts, arc, times, float(robot.radius)))
+        return out
 
     @property
     def length(self) -> float:
@@ -68,3 +95,20 @@ class RobotPath:
     def segment_speeds(self) -> np.ndarray:
         """(N-1,) planned speed of each segment, m/s: the speed the robot never exceeds."""
         return np.diff(self.arc) / np.diff(self.times)
+
+
+@numba.njit(cache=True, nogil=True)
+def _arcs(steps: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """(N,) each robot's cumulative arc length from 0, in the order ``np.cumsum`` adds.
+
+    Shapes: steps (N-1,) distance between consecutive points of all robots (the step
+    from one robot's last point to the next robot's first is ignored), ends (R,) one
+    past each robot's last point."""
+    arc = np.empty(steps.size + 1)
+    k = 0
+    for end in ends:
+        arc[k] = 0.0
+        for q in range(k + 1, end):
+            arc[q] = arc[q - 1] + steps[q - 1]
+        k = end
+    return arc

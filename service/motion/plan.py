@@ -35,6 +35,7 @@ from service.core.schemas import (
     ScheduleRequest,
     SolverInfoOut,
 )
+from service.core.threads import shared_pool
 from service.geometry.graph import CoordinationGraph, GeometrySettings, build_graph
 from service.geometry.paths import RobotPath
 from service.motion.dependencies import Decision, dependency_plan, without_implied
@@ -108,7 +109,7 @@ def derive(request: PathsRequest, geometry: GeometrySettings) -> CoordinationGra
     Raises:
         ProblemError: fixed paths leave no collision-free order.
     """
-    return build_graph([RobotPath.from_wire(r) for r in request.robots], geometry)
+    return build_graph(RobotPath.all_from_wire(request.robots), geometry)
 
 
 def world_request(world: World, objective: str = "avg_completion") -> ScheduleRequest | None:
@@ -190,9 +191,13 @@ def plan_paths(
             reserve_s=CHECK_RESERVE_S,  # its graph-form response is not rendered
         )
     solve_done = time.perf_counter()
+    # The graph's wire body (Python, holding the GIL) is built on a pool thread while the
+    # plan is executed and checked (numba kernels, most without it).
+    graph_wire = shared_pool().submit(graph.to_wire, request, request.previous, progress)
     executed = _execute_safely(graph, _decided(answer), state)
-    graph_wire = graph.to_wire(request, request.previous, progress)
-    response = _render(request, graph, graph_wire, answer, executed, solve_done - graph_done, state)
+    response = _render(
+        request, graph, graph_wire.result(), answer, executed, solve_done - graph_done, state
+    )
     # Motion: everything after the solve, building this answer included (its encoding,
     # which must come after, is not, but the reserve learns it too).
     motion_done = time.perf_counter()

@@ -126,7 +126,7 @@ def simulate(request: SimulationRequest) -> SimulationResponse:
     Raises:
         ProblemError: ids or arc lengths that do not fit the robots.
     """
-    paths = [RobotPath.from_wire(r) for r in request.robots]
+    paths = RobotPath.all_from_wire(request.robots)
     if request.trajectories is not None:
         trajs = _playback(paths, request)
         completion = {p.id: float(t.t[-1]) for p, t in zip(paths, trajs, strict=True)}

@@ -70,3 +70,17 @@ def test_time_and_arc_are_inverse_and_positions_lie_on_segments(
     p0, p1 = path.points[k], path.points[k + 1]
     expected = p0 + (s - path.arc[k]) / (path.arc[k + 1] - path.arc[k]) * (p1 - p0)
     np.testing.assert_allclose(path.position_at(s), expected, atol=1e-9)
+
+
+@settings(max_examples=40, deadline=None, derandomize=True)
+@given(robots=fleets(min_robots=1, max_robots=6))
+def test_paths_built_in_bulk_are_those_built_one_by_one(robots: list[dict[str, object]]) -> None:
+    """The same points, arc lengths and times to the bit, and the same ids and radii."""
+    wire = [PathRobotIn.model_validate(r) for r in robots]
+    bulk = RobotPath.all_from_wire(wire)
+    assert len(bulk) == len(wire)
+    for got, one in zip(bulk, (RobotPath.from_wire(r) for r in wire), strict=True):
+        assert (got.id, got.radius) == (one.id, one.radius)
+        for field in ("points", "arc", "times"):
+            np.testing.assert_array_equal(getattr(got, field), getattr(one, field), err_msg=field)
+    assert RobotPath.all_from_wire([]) == []
