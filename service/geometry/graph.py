@@ -490,24 +490,70 @@ def _parked_orders(
     once is a contradiction that :func:`_check_fixed_orders` reports.
     """
     b_parked = conf_span[:, 2] <= 0.0
+    at_start = np.flatnonzero(boxes.x0 <= 0.0)  # (K,) boxes of a's first piece
+    counts = np.array([p.points.shape[0] for p in paths])  # (R,)
+    first_point = np.concatenate([[0], np.cumsum(counts)])  # (R+1,)
+    gaps = _start_gaps(  # (K,)
+        np.concatenate([p.points for p in paths]),
+        np.concatenate([p.arc for p in paths]),
+        first_point,
+        boxes.i[at_start],
+        boxes.j[at_start],
+        boxes.y0[at_start],
+        boxes.y1[at_start],
+    )
+    radius = np.array([p.radius for p in paths])  # (R,)
     near = np.zeros(boxes.size, dtype=bool)  # (B,) a's first point within reach in the box
-    for k in np.flatnonzero(boxes.x0 <= 0.0).tolist():
-        a, b = paths[int(boxes.i[k])], paths[int(boxes.j[k])]
-        gap = _distance_to_stretch(a.points[0], b, float(boxes.y0[k]), float(boxes.y1[k]))
-        near[k] = gap < a.radius + b.radius + margin
+    near[at_start] = gaps < radius[boxes.i[at_start]] + radius[boxes.j[at_start]] + margin
     a_parked = np.logical_or.reduceat(near, first) if first.size else np.zeros(0, dtype=bool)
     return np.where(a_parked & b_parked, 2, a_parked.astype(np.int8) - b_parked).astype(np.int8)
 
 
-def _distance_to_stretch(q: np.ndarray, path: RobotPath, s0: float, s1: float) -> float:
-    """Least distance from point q (2,) to ``path`` between arc lengths s0 and s1 (the
-    stretch may turn at path vertices: a box's stretch is not assumed straight)."""
-    inner = path.arc[(path.arc > s0) & (path.arc < s1)]
-    pts = path.position_at(np.concatenate([[s0], inner, [s1]]))  # (K, 2)
-    p0, d = pts[:-1], np.diff(pts, axis=0)  # (K-1, 2)
-    length2 = np.einsum("kd,kd->k", d, d)
-    f = np.clip(np.einsum("kd,kd->k", q - p0, d) / np.maximum(length2, 1e-300), 0.0, 1.0)
-    return float(np.linalg.norm(p0 + f[:, None] * d - q, axis=1).min())
+@numba.njit(cache=True, nogil=True)
+def _start_gaps(
+    points: np.ndarray,  # (N, 2) all paths' points, robot by robot
+    arc: np.ndarray,  # (N,) their arc lengths
+    first_point: np.ndarray,  # (R+1,) robot r's points are first_point[r]:first_point[r+1]
+    robot_a: np.ndarray,  # (K,) int
+    robot_b: np.ndarray,  # (K,) int
+    s0: np.ndarray,  # (K,) float, stretch of robot b
+    s1: np.ndarray,  # (K,) float
+) -> np.ndarray:  # (K,) least distance from a's first point to b's stretch s0..s1
+    """Least distance from each robot a's first point to robot b's path between arc lengths
+    s0 and s1 (the stretch may turn at path vertices: a box's stretch is not assumed
+    straight), over the stretch's straight pieces."""
+    out = np.empty(robot_a.size)
+    for k in range(robot_a.size):
+        qx, qy = points[first_point[robot_a[k]], 0], points[first_point[robot_a[k]], 1]
+        lo, hi = first_point[robot_b[k]], first_point[robot_b[k] + 1]
+        # The piece of b's path from s0 to s1, vertex by vertex.
+        v = lo + np.searchsorted(arc[lo:hi], s0[k], side="right") - 1
+        v = min(max(v, lo), hi - 2)
+        best = np.inf
+        s = s0[k]
+        while True:
+            end = min(s1[k], arc[v + 1])
+            ax, ay = _point_at(points, arc, v, s)
+            bx, by = _point_at(points, arc, v, end)
+            dx, dy = bx - ax, by - ay
+            length2 = max(dx * dx + dy * dy, 1e-300)
+            f = min(1.0, max(0.0, ((qx - ax) * dx + (qy - ay) * dy) / length2))
+            best = min(best, np.hypot(ax + f * dx - qx, ay + f * dy - qy))
+            if end >= s1[k] or v + 2 >= hi:
+                break
+            v, s = v + 1, end
+        out[k] = best
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _point_at(points: np.ndarray, arc: np.ndarray, v: int, s: float) -> tuple[float, float]:
+    """The point at arc length s on the path segment from vertex v to v + 1."""
+    f = (s - arc[v]) / (arc[v + 1] - arc[v])
+    return (
+        points[v, 0] + f * (points[v + 1, 0] - points[v, 0]),
+        points[v, 1] + f * (points[v + 1, 1] - points[v, 1]),
+    )
 
 
 def _check_fixed_orders(graph: CoordinationGraph) -> None:
