@@ -20,6 +20,7 @@ import numpy as np
 
 from service.core.path_schemas import (
     CoordinationGraphResponse,
+    Dependency,
     MotionChecksOut,
     PathsRequest,
     PathsScheduleResponse,
@@ -31,6 +32,7 @@ from service.core.schemas import (
     AssignmentOut,
     CostsOut,
     NodeTimesOut,
+    ProgressIn,
     RobotScheduleOut,
     ScheduleRequest,
     SolverInfoOut,
@@ -98,9 +100,21 @@ class _Executed:
 
     decision: Decision
     plan: DependencyPlan  # the constraints ahead (of a re-schedule's state), none implied
+    plan_wire: list[Dependency]  # the same plan in the wire format
     run: Run
     trajectories: list[Trajectory]
     clearance: Clearance
+
+
+@dataclass(frozen=True, eq=False)
+class _Described:
+    """What the answer says of the graph and of the solver's decision, whatever its
+    execution (built on a kernel thread while the plan is executed)."""
+
+    decision: Decision
+    graph_wire: dict[str, Any] | None  # the graph's JSON body (see PathsScheduleResponse)
+    time_points: list[np.ndarray]  # per robot (P_r,): :func:`_time_points`
+    assignment: list[AssignmentOut]  # ``decision`` in the wire format
 
 
 def derive(request: PathsRequest, geometry: GeometrySettings) -> CoordinationGraph:
@@ -191,12 +205,13 @@ def plan_paths(
             reserve_s=CHECK_RESERVE_S,  # its graph-form response is not rendered
         )
     solve_done = time.perf_counter()
-    # The graph's wire body (Python, holding the GIL) is built on a pool thread while the
-    # plan is executed and checked (numba kernels, most without it).
-    graph_wire = shared_pool().submit(graph.to_wire, request, request.previous, progress)
-    executed = _execute_safely(graph, _decided(answer), state)
+    # What the answer says of the graph (Python, holding the GIL) is built on a kernel
+    # thread while the plan is executed and checked (numba kernels, most without it).
+    decision = _decided(answer)
+    described = shared_pool().submit(_describe, request, graph, progress, decision)
+    executed = _execute_safely(graph, decision, state)
     response = _render(
-        request, graph, graph_wire.result(), answer, executed, solve_done - graph_done, state
+        request, graph, described.result(), answer, executed, solve_done - graph_done, state
     )
     # Motion: everything after the solve, building this answer included (its encoding,
     # which must come after, is not, but the reserve learns it too).
@@ -227,6 +242,7 @@ def _execute_safely(graph: CoordinationGraph, decision: Decision, state: State |
         # The constraints still ahead, without those others imply: what is run and sent.
         ahead = _ahead(graph.paths, dependency_plan(graph, candidate), state)
         plan = without_implied(ahead, len(graph.paths))
+        plan_wire = shared_pool().submit(plan_to_wire, graph.paths, plan)  # while it runs
         if state is None:
             run = execute(graph.paths, plan)
         else:
@@ -237,17 +253,32 @@ def _execute_safely(graph: CoordinationGraph, decision: Decision, state: State |
         trajs = trajectories(graph.paths, run)
         clearance = check_clearance(trajs)
         if clearance.ok:
-            return _Executed(candidate, plan, run, trajs, clearance)
+            return _Executed(candidate, plan, plan_wire.result(), run, trajs, clearance)
         log.error(
             "plan failed the clearance check %s; trying all-exclusive", clearance.overlaps[:3]
         )
     raise InvalidAnswerError("no executable collision-free plan for a valid assignment")
 
 
+def _describe(
+    request: PathsRequest,
+    graph: CoordinationGraph,
+    progress: ProgressIn | None,
+    decision: Decision,
+) -> _Described:
+    """The parts of the answer that its execution does not change."""
+    return _Described(
+        decision,
+        graph.to_wire(request, request.previous, progress),
+        _time_points(graph),
+        _assignment(graph, decision),
+    )
+
+
 def _render(
     request: PathsRequest,
     graph: CoordinationGraph,
-    graph_wire: dict[str, Any] | None,
+    described: _Described,
     answer: Checked | None,
     executed: _Executed,
     solve_s: float,
@@ -257,7 +288,7 @@ def _render(
     (from ``state`` on, for a re-schedule: the dependencies left to obey)."""
     paths, run = graph.paths, executed.run
     ids = graph.node_ids()
-    planned = _time_points(graph)
+    planned = described.time_points
     node_bounds = np.searchsorted(graph.node_robot, np.arange(len(paths) + 1)).tolist()
     realized, schedule = [], []
     for r, path in enumerate(paths):
@@ -286,7 +317,9 @@ def _render(
         objective=request.objective,
         cost=costs[request.objective],
         costs=CostsOut(**costs),
-        assignment=_assignment(graph, executed.decision),
+        assignment=described.assignment
+        if executed.decision is described.decision
+        else _assignment(graph, executed.decision),
         schedule=schedule,
         solver=_solver_info(answer, executed, solve_s),
         checks=MotionChecksOut(
@@ -296,7 +329,7 @@ def _render(
             collision_free=executed.clearance.ok,
             min_clearance_m=executed.clearance.min_gap,
         ),
-        graph=graph_wire,  # its JSON body (see PathsScheduleResponse)
+        graph=described.graph_wire,
         node_spans=graph.node_spans(),
         trajectories=[
             TrajectoryOut.model_construct(
@@ -305,7 +338,7 @@ def _render(
             )
             for path, tr in zip(paths, executed.trajectories, strict=True)
         ],
-        dependencies=plan_to_wire(paths, executed.plan),
+        dependencies=executed.plan_wire,
         timings=TimingsOut(graph_s=0.0, solve_s=solve_s, motion_s=0.0),  # set by the caller
     )
 
