@@ -304,23 +304,42 @@ def _implied_kernel(
 def _by_waiter_and_point(
     waiter: np.ndarray,  # (D,) int in [0, R)
     wait: np.ndarray,  # (D,) float
+    waitee: np.ndarray,  # (D,) int
+    until: np.ndarray,  # (D,) float
     n_robots: int,
-) -> tuple[np.ndarray, np.ndarray]:  # (D,) permutation, (R+1,) each waiter's rows
-    """The rows grouped by waiter (a counting sort), each group by wait point (stable):
-    ``np.lexsort((wait, waiter))`` without its ~60 ms at 437,000 rows."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    # -> the rows grouped by waiter (D,) x 4, each group by wait point (stable), and
+    # (R+1,) each waiter's rows
+    """The rows as ``np.lexsort((wait, waiter))`` orders them: a counting sort by waiter
+    that moves the rows themselves (no permutation gathered after, ~40 ms less at 437,000
+    rows than a lexsort), then each waiter's rows sorted where they are not in order."""
     start = np.zeros(n_robots + 1, dtype=np.int64)
     for d in range(waiter.size):
         start[waiter[d] + 1] += 1
     start = np.cumsum(start)
     fill = start[:-1].copy()
-    perm = np.empty(waiter.size, dtype=np.int64)
+    out_waiter, out_waitee = np.empty_like(waiter), np.empty_like(waitee)
+    out_wait, out_until = np.empty_like(wait), np.empty_like(until)
     for d in range(waiter.size):
-        perm[fill[waiter[d]]] = d
+        k = fill[waiter[d]]
+        out_waiter[k], out_wait[k], out_waitee[k], out_until[k] = (
+            waiter[d],
+            wait[d],
+            waitee[d],
+            until[d],
+        )
         fill[waiter[d]] += 1
     for r in range(n_robots):
-        rows = perm[start[r] : start[r + 1]]
-        perm[start[r] : start[r + 1]] = rows[np.argsort(wait[rows], kind="mergesort")]
-    return perm, start
+        lo, hi = start[r], start[r + 1]
+        if hi - lo < 2 or np.all(out_wait[lo + 1 : hi] >= out_wait[lo : hi - 1]):
+            continue
+        order = lo + np.argsort(out_wait[lo:hi], kind="mergesort")
+        out_wait[lo:hi], out_waitee[lo:hi], out_until[lo:hi] = (
+            out_wait[order],
+            out_waitee[order],
+            out_until[order],
+        )
+    return out_waiter, out_wait, out_waitee, out_until, start
 
 
 def without_implied(plan: DependencyPlan, n_robots: int) -> DependencyPlan:
@@ -342,9 +361,8 @@ def without_implied(plan: DependencyPlan, n_robots: int) -> DependencyPlan:
     link read keeps 15,268 in ~140 ms). Any subset of second links drops only implied
     constraints.
     """
-    by_point, start = _by_waiter_and_point(plan.waiter, plan.wait_s, n_robots)  # (D,), (R+1,)
-    waiter, wait, waitee, until = (
-        a[by_point] for a in (plan.waiter, plan.wait_s, plan.waitee, plan.until_s)
+    waiter, wait, waitee, until, start = _by_waiter_and_point(  # (D,) x 4, (R+1,)
+        plan.waiter, plan.wait_s, plan.waitee, plan.until_s, n_robots
     )
     order = np.argsort(np.diff(start), kind="stable")  # (R,) fewest constraints first
     keep = _implied_kernel(start, wait, waitee, until, order, IMPLIED_TOL_M)  # (D,)
