@@ -166,17 +166,21 @@ def test_boxes_on_side_i_are_coarse_pieces_along_a_shared_stretch() -> None:
     np.testing.assert_allclose(pieces[1:, 0], pieces[:-1, 1])
 
 
-@pytest.mark.parametrize("parts", [2, 3, 7])
-def test_boxes_are_the_same_however_the_narrow_phase_is_cut(
-    parts: int, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    """The narrow phase run in parts on threads gives the boxes of one run, in order."""
-    paths = paths_of(PathsRequest.model_validate(generate("wh_two_way", 25, 3).to_request()))
+def assert_the_same_boxes_in_parts(paths: list[RobotPath], parts: int) -> None:
+    """The narrow phase run in ``parts`` parts on threads gives the boxes of one run, in
+    order."""
     whole = _boxes(paths)
-    monkeypatch.setattr(interference, "parts_for", lambda work, least: parts)
-    cut = _boxes(paths)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(interference, "parts_for", lambda work, least: parts)
+        cut = _boxes(paths)
     for field in Boxes.__dataclass_fields__:
         np.testing.assert_array_equal(getattr(cut, field), getattr(whole, field), err_msg=field)
+
+
+@pytest.mark.parametrize("parts", [2, 3, 7])
+def test_boxes_are_the_same_however_the_narrow_phase_is_cut(parts: int) -> None:
+    req = PathsRequest.model_validate(generate("wh_two_way", 25, 3).to_request())
+    assert_the_same_boxes_in_parts(paths_of(req), parts)
 
 
 @settings(max_examples=15, deadline=None, derandomize=True)
@@ -185,13 +189,7 @@ def test_random_fleets_cut_in_parts_give_the_same_boxes(
     robots: list[dict[str, Any]], parts: int
 ) -> None:
     """Parts that are empty or hold a single segment's candidates change nothing either."""
-    paths = paths_of(request(robots))
-    whole = _boxes(paths)
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(interference, "parts_for", lambda work, least: parts)
-        cut = _boxes(paths)
-    for field in Boxes.__dataclass_fields__:
-        np.testing.assert_array_equal(getattr(cut, field), getattr(whole, field), err_msg=field)
+    assert_the_same_boxes_in_parts(paths_of(request(robots)), parts)
 
 
 @settings(max_examples=40, deadline=None, derandomize=True)
