@@ -48,7 +48,7 @@ from service.core.problem import (
 )
 from service.core.schemas import PreviousConflictIn, ProgressIn, ScheduleRequest
 from service.geometry.interference import Boxes, interference_boxes
-from service.geometry.paths import RobotPath
+from service.geometry.paths import RobotPath, concatenated
 
 __all__ = ["CoordinationGraph", "GeometrySettings", "build_graph"]
 
@@ -491,11 +491,10 @@ def _parked_orders(
     """
     b_parked = conf_span[:, 2] <= 0.0
     at_start = np.flatnonzero(boxes.x0 <= 0.0)  # (K,) boxes of a's first piece
-    counts = np.array([p.points.shape[0] for p in paths])  # (R,)
-    first_point = np.concatenate([[0], np.cumsum(counts)])  # (R+1,)
+    points, arc, first_point = concatenated(paths)  # (N, 2), (N,), (R+1,)
     gaps = _start_gaps(  # (K,)
-        np.concatenate([p.points for p in paths]),
-        np.concatenate([p.arc for p in paths]),
+        points,
+        arc,
         first_point,
         boxes.i[at_start],
         boxes.j[at_start],

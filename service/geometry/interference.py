@@ -37,7 +37,7 @@ import numpy as np
 import shapely
 
 from service.core.threads import balanced_cuts, in_parts, parts_for
-from service.geometry.paths import RobotPath
+from service.geometry.paths import RobotPath, concatenated
 
 __all__ = ["CO_DIRECTIONAL_DEG", "Boxes", "Segments", "TooComplex", "interference_boxes"]
 
@@ -83,15 +83,12 @@ class Segments:
         100 points costs the geometry no more than sent as 2. All paths at once (robot
         by robot, 250 paths of 100 points took 10-20 ms).
         """
-        counts = np.array([p.points.shape[0] for p in paths])  # (R,)
-        ends = np.cumsum(counts)  # (R,) one past each robot's last point
-        points = np.concatenate([p.points for p in paths])  # (N, 2)
-        arc = np.concatenate([p.arc for p in paths])  # (N,)
+        points, arc, first_point = concatenated(paths)  # (N, 2), (N,), (R+1,)
         corner = np.zeros(arc.size, dtype=bool)  # (N,) the path turns there, or ends
         corner[1:-1] = _turns(points, arc)
-        corner[ends - counts] = corner[ends - 1] = True
+        corner[first_point[:-1]] = corner[first_point[1:] - 1] = True
         at = np.flatnonzero(corner)  # (K,) corners, robot by robot
-        robot = np.repeat(np.arange(len(paths)), counts)[at]  # (K,)
+        robot = np.repeat(np.arange(len(paths)), np.diff(first_point))[at]  # (K,)
         start = np.flatnonzero(robot[1:] == robot[:-1])  # (G,) corners that start a segment
         return cls(
             robot[start],

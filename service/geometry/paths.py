@@ -16,7 +16,7 @@ import numpy as np
 
 from service.core.path_schemas import PathRobotIn
 
-__all__ = ["RobotPath"]
+__all__ = ["RobotPath", "concatenated"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -34,12 +34,7 @@ class RobotPath:
         """Arrays of a validated wire robot (``speed``/``start_time`` or ``times``)."""
         points = np.asarray(robot.path, dtype=np.float64)  # (N, 2)
         arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
-        if robot.times is not None:
-            times = np.asarray(robot.times, dtype=np.float64)
-        else:
-            assert robot.speed is not None  # the wire model guarantees one timing
-            times = (robot.start_time or 0.0) + arc / robot.speed
-        return cls(robot.id, points, arc, times, float(robot.radius))
+        return cls(robot.id, points, arc, _planned_times(robot, arc), float(robot.radius))
 
     @classmethod
     def all_from_wire(cls, robots: Sequence[PathRobotIn]) -> list[RobotPath]:
@@ -57,12 +52,7 @@ class RobotPath:
         arcs = np.split(_arcs(steps, ends), ends[:-1])
         out = []
         for robot, pts, arc in zip(robots, np.split(points, ends[:-1]), arcs, strict=True):
-            if robot.times is not None:
-                times = np.asarray(robot.times, dtype=np.float64)
-            else:
-                assert robot.speed is not None  # the wire model guarantees one timing
-                times = (robot.start_time or 0.0) + arc / robot.speed
-            out.append(cls(robot.id, pts, arc, times, float(robot.radius)))
+            out.append(cls(robot.id, pts, arc, _planned_times(robot, arc), float(robot.radius)))
         return out
 
     @property
@@ -95,6 +85,25 @@ class RobotPath:
     def segment_speeds(self) -> np.ndarray:
         """(N-1,) planned speed of each segment, m/s: the speed the robot never exceeds."""
         return np.diff(self.arc) / np.diff(self.times)
+
+
+def concatenated(paths: Sequence[RobotPath]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every path's points and arc lengths, robot by robot, as the fleet-wide arrays the
+    bulk kernels read -> (points (N, 2), arc (N,), first_point (R+1,): robot r's points
+    are first_point[r]:first_point[r+1])."""
+    counts = np.array([p.points.shape[0] for p in paths], dtype=np.int64)  # (R,)
+    first_point = np.concatenate([[0], np.cumsum(counts)])  # (R+1,)
+    points = np.concatenate([p.points for p in paths])  # (N, 2)
+    return points, np.concatenate([p.arc for p in paths]), first_point
+
+
+def _planned_times(robot: PathRobotIn, arc: np.ndarray) -> np.ndarray:
+    """(N,) the wire robot's planned time at each point: its ``times``, or from its
+    ``start_time`` at its ``speed`` along ``arc`` (N,), its arc lengths."""
+    if robot.times is not None:
+        return np.asarray(robot.times, dtype=np.float64)
+    assert robot.speed is not None  # the wire model guarantees one timing
+    return (robot.start_time or 0.0) + arc / robot.speed
 
 
 @numba.njit(cache=True, nogil=True)
