@@ -84,7 +84,9 @@ class Settings(BaseSettings):
     # LNS sub-problems solved at once, re-insertion searches a turn runs at once), and how
     # many solves run at once in worker threads; their product should not exceed the
     # machine's cores. One fleet per service on 2 cores: concurrency 1 and 2 workers
-    # (measured in docs/benchmarks.md, "Anytime auto", auto_2cores).
+    # (measured in docs/benchmarks.md, "Anytime auto", auto_2cores). Re-insertion's
+    # searches also take the cores no other solve holds (a lone request every core:
+    # ``service.core.threads.cores_per_solve``), whatever this says.
     exact_workers: int = Field(default=1, ge=1)
     # The ``exact`` solver's answer the same on every run with the same seed, even when the
     # time limit cuts its search: CP-SAT stops on a deterministic-time budget (about half

@@ -8,19 +8,24 @@ cores share memory bandwidth): the narrow phase of 0.88 M boxes 125 -> 103 ms (l
 20), a 437,000-constraint plan 55 -> 50 ms (medians 87 -> 57). Work run on the pool must
 never wait for other work on the pool (with every thread waiting, it would wait for
 ever); callers that wait are never pool threads.
+
+Solves count themselves as under way (:func:`solving`) so that a search that can use
+more threads takes the cores no other solve of the process holds (:func:`cores_per_solve`):
+a lone request gets the whole machine, two at once on two cores one core each.
 """
 
 from __future__ import annotations
 
 import os
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager
 from typing import TypeVar
 
 import numpy as np
 
-__all__ = ["balanced_cuts", "in_parts", "parts_for", "shared_pool"]
+__all__ = ["balanced_cuts", "cores_per_solve", "in_parts", "parts_for", "shared_pool", "solving"]
 
 A = TypeVar("A")
 T = TypeVar("T")
@@ -39,6 +44,42 @@ def shared_pool() -> ThreadPoolExecutor:
             pool = ThreadPoolExecutor(os.cpu_count(), thread_name_prefix="kernel")
             _pool = (os.getpid(), pool)
         return _pool[1]
+
+
+# Solves under way in this process (:func:`solving`), and the lock that guards the count.
+_solves = 0
+_solves_lock = threading.Lock()
+
+
+def _no_solves() -> None:
+    """A forked child runs none of its parent's solves."""
+    global _solves
+    _solves = 0
+
+
+os.register_at_fork(after_in_child=_no_solves)
+
+
+@contextmanager
+def solving() -> Iterator[None]:
+    """Count one solve as under way while the block runs (see :func:`cores_per_solve`)."""
+    global _solves
+    with _solves_lock:
+        _solves += 1
+    try:
+        yield
+    finally:
+        with _solves_lock:
+            _solves -= 1
+
+
+def cores_per_solve() -> int:
+    """This process's cores shared among its solves under way (:func:`solving`; none
+    counts as one), at least one: a search reads it again as it goes, so that a request
+    arriving while another searches on every core gets its share from the next turn on."""
+    with _solves_lock:
+        running = max(_solves, 1)
+    return max(1, (os.cpu_count() or 1) // running)
 
 
 def parts_for(work: int, least_work: int) -> int:

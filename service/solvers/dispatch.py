@@ -38,6 +38,7 @@ from service.core.schemas import (
     ScheduleResponse,
     SolverInfoOut,
 )
+from service.core.threads import solving
 from service.solvers import (  # noqa: F401  (registers the solvers)
     bbts,
     cmaes,
@@ -244,7 +245,8 @@ def solve_problem(
     if warm is not None and check(problem, ctx.cliques, warm).ok[0]:
         ctx.warm = warm
     name = opts.solver  # "auto" is the anytime portfolio (solvers/portfolio.py)
-    used, output, checks = _first_valid_answer(ctx, name)
+    with solving():  # a search may take the cores no other solve holds
+        used, output, checks = _first_valid_answer(ctx, name)
     runtime = time.perf_counter() - start
     info = SolverInfoOut(
         name=used,

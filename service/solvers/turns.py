@@ -1,12 +1,16 @@
-"""Re-insertion search in turns: restarted from the best answer each turn, one chain per core.
+"""Re-insertion search in turns: restarted from the best answer each turn, a chain per free core.
 
 ``auto``'s large stage (:mod:`service.solvers.portfolio`) runs re-insertion search
 (:mod:`service.solvers.reinsert`) in turns of at most ``turn_s`` and ``turn_share`` of
 the time given. Each turn starts from the best answer so far, so an annealed search that
 wandered off while hot comes back to it; with several cores a turn runs one search per
 core at once, each with a seed of its own, and the cheapest goes on: the turns are where
-the chains meet. Every turn's search cools over the same span (the first COOLED_SHARE of
-the time, and all but MOST_COLD_S at least), then searches cold.
+the chains meet. The cores are those the solve may take at that turn: its share of the
+machine among the solves under way (:func:`~service.core.threads.cores_per_solve`), so a
+lone request searches on every core whatever its ``workers``, and one that arrives while
+it searches gets its share from the next turn on. Every turn's search cools over the same
+span (the first COOLED_SHARE of the time, and all but MOST_COLD_S at least), then searches
+cold.
 
 Robot-priority search (:mod:`service.solvers.priority`) took a part of every cold turn
 from session 26 to session 50 (its part following the cost each search took off per
@@ -25,6 +29,7 @@ runs cheaper without), other worlds 0.9714 -> 0.9779 (19 / 17), avg_delay 0.8840
 
 from __future__ import annotations
 
+import os
 import time
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import nullcontext
@@ -32,6 +37,7 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 from service.core.assignment import Assignments
+from service.core.threads import cores_per_solve
 from service.solvers.registry import SolveContext
 from service.solvers.reinsert import ReinsertResult, reinsert_search
 
@@ -78,16 +84,26 @@ class TurnsConfig:
     cooling_share: float = COOLED_SHARE
     most_cold_s: float = MOST_COLD_S  # ... for this many seconds at most (see MOST_COLD_S)
     # Re-insertion searches a turn runs at once, each in a thread from the best answer so far
-    # with a seed of its own; the cheapest goes on (None: one per core the solve has,
-    # ``SolveContext.workers``). A step's kernels release the GIL, the Python between them
-    # does not: two threads took 1.43-1.9x the steps of one (session 30). Measured (session
+    # with a seed of its own; the cheapest goes on (None: one per core the solve may take at
+    # that turn, ``threads.cores_per_solve``, and ``SolveContext.workers`` at least; until
+    # session 64 its ``workers`` alone, so the service's default of one worker per solve,
+    # two solves at once, left a lone request's second core idle). A step's kernels
+    # release the GIL, the Python between them does not: two threads took 1.43-1.9x the
+    # steps of one (session 30). Measured (session
     # 44, ``python -m bench.ab``, two chains against one on one solve's two cores; 1 s,
     # generated warehouses of 100 and 250 robots, three worlds a kind, two seeds, cost
     # ratio): with ``--method auto_2cores`` the two-way and two-lane kinds 0.8892 / 0.8829
     # (14 cheaper, 10 dearer of 24), other worlds of those and of wh_one_way and wh_mixed 250
     # (seeds from 2,000) 0.9805 / 0.9688 (21 / 15); two threads forced on one worker's
     # ``auto``: 0.9006 / 0.8954 (15 / 9), seeds from 1,000 0.9800 / 0.9626 (25 / 11); 5 s
-    # 0.9587 / 0.9556 (12 / 12).
+    # 0.9587 / 0.9556 (12 / 12). Again in session 64 (``python -m bench.ab --b
+    # service.solvers.turns.TurnsConfig.chains=2``: ``auto`` of one worker as the service
+    # runs a lone request, one chain against two; wh_two_way, wh_two_lane, floor_dense of
+    # 100 and wh_two_way, wh_two_lane of 250 robots, three worlds, two seeds): 1 s 0.9266 /
+    # 0.9346 (12 cheaper, 18 dearer of 30 with one; floor_dense 100 0.960 / 0.989,
+    # wh_two_way 250 0.847 / 0.858), 5 s 0.9755 / 0.9776 (14 / 15; wh_two_lane 250 0.975 /
+    # 0.988, but wh_two_way 100 0.986 / 0.959, dearer in 6 of 6: at 100 robots each of two
+    # chains takes 0.70-0.83 of one chain's steps, at 250 no fewer).
     chains: int | None = None
 
 
@@ -109,7 +125,8 @@ def take_turns(
 ) -> TurnsResult:
     """Re-insertion search in turns from the valid ``start`` (of ``cost``) until
     ``deadline`` (monotonic), each turn from the best answer so far with the next seed, in
-    ``config.chains`` threads (one per core of the solve by default). ``config`` None:
+    ``config.chains`` threads (by default one per core the solve may take at that turn, at
+    least ``ctx.workers``: see TurnsConfig.chains). ``config`` None:
     TurnsConfig's defaults, read at the call (so that ``bench.ab`` can vary them)."""
     config = TurnsConfig() if config is None else config
     best, turns = start, 0
@@ -117,11 +134,14 @@ def take_turns(
     turn_s = min(config.turn_s, config.turn_share * (deadline - now))
     cold_s = min((1 - config.cooling_share) * (deadline - now), config.most_cold_s)
     cooling = (now, deadline - cold_s)  # then it searches cold
-    chains = config.chains or ctx.workers
-    with ThreadPoolExecutor(chains) if chains > 1 else nullcontext() as pool:
+    most = config.chains or max(ctx.workers, os.cpu_count() or 1)
+    with ThreadPoolExecutor(most) if most > 1 else nullcontext() as pool:
         while (began := time.monotonic()) < deadline:
             until = min(deadline, began + turn_s)
-            found = _reinsertion(ctx, best, until, seed + turns, cooling, pool, chains)
+            chains = config.chains or max(ctx.workers, cores_per_solve())
+            found = _reinsertion(
+                ctx, best, until, seed + turns, cooling, pool if chains > 1 else None, chains
+            )
             best, cost, turns = found.best, found.cost, turns + 1
     return TurnsResult(best, cost, turns)
 

@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from service.core.threads import balanced_cuts, in_parts, parts_for
+from service.core.threads import balanced_cuts, cores_per_solve, in_parts, parts_for, solving
 
 
 @settings(max_examples=200, deadline=None, derandomize=True)
@@ -59,3 +59,31 @@ def test_parts_are_never_smaller_than_the_least_work(monkeypatch: pytest.MonkeyP
     assert [parts_for(w, 100) for w in (0, 99, 100, 250, 399, 400, 10**9)] == [1, 1, 1, 2, 3, 4, 4]
     monkeypatch.setattr(os, "cpu_count", lambda: None)
     assert parts_for(10**9, 100) == 1
+
+
+def test_a_solve_counts_while_under_way_and_shares_the_cores() -> None:
+    """Every core with no solve or one under way, the cores split among more (at least
+    one each), the count released when a solve ends, also by an exception."""
+    cores = os.cpu_count() or 1
+    assert cores_per_solve() == cores
+    with solving():
+        assert cores_per_solve() == cores
+        with solving():
+            assert cores_per_solve() == max(1, cores // 2)
+            with pytest.raises(RuntimeError), solving():
+                assert cores_per_solve() == max(1, cores // 3)
+                raise RuntimeError
+            assert cores_per_solve() == max(1, cores // 2)
+    assert cores_per_solve() == cores
+
+
+def test_a_forked_child_runs_none_of_its_parents_solves() -> None:
+    """A child forked while solves are under way counts none of them: its own solves
+    may take every core (the count would otherwise never fall there)."""
+    cores = os.cpu_count() or 1
+    with solving(), solving():
+        child = os.fork()
+        if child == 0:  # the child: exit with what it reads
+            os._exit(cores_per_solve())
+        _, status = os.waitpid(child, 0)
+    assert os.waitstatus_to_exitcode(status) == cores

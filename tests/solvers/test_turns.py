@@ -1,12 +1,15 @@
 """Re-insertion search in turns: the turns return a valid answer no worse than their
 start, within their deadline (hypothesis over tiny, fixed-direction, small, stitched and
-conformance problems), each turn from the best so far, its chains one per core."""
+conformance problems), each turn from the best so far, its chains one per core of the
+solve's share of the machine, read at each turn."""
 
 from __future__ import annotations
 
 import json
+import os
 import time
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import ExitStack
 from dataclasses import replace
 
 import pytest
@@ -15,6 +18,7 @@ from hypothesis import strategies as st
 
 from service.core.assignment import Assignments
 from service.core.check import check
+from service.core.threads import solving
 from service.solvers import turns
 from service.solvers.registry import SolveContext
 from service.solvers.reinsert import ReinsertResult, reinsert_search
@@ -136,15 +140,28 @@ def test_each_turn_starts_from_the_best_answer_so_far(
     _assert_valid(ctx, found.best, found.cost)
 
 
+CORES = os.cpu_count() or 1
+
+
 @pytest.mark.parametrize(
-    ("workers", "chains", "expected"), [(1, None, 1), (2, None, 2), (2, 1, 1), (1, 3, 3)]
+    ("workers", "chains", "solves", "expected"),
+    [
+        (1, None, 0, CORES),  # alone: every core
+        (1, None, 1, CORES),
+        (1, None, 2, max(1, CORES // 2)),  # another solve under way: its share
+        (2, None, 2 * CORES, 2),  # never fewer than the solve's own workers
+        (2, 1, 0, 1),
+        (1, 3, 2, 3),
+    ],
 )
-def test_a_turn_runs_one_reinsertion_chain_per_core_each_with_its_own_seed(
-    workers: int, chains: int | None, expected: int, monkeypatch: pytest.MonkeyPatch
+def test_a_turn_runs_a_reinsertion_chain_per_core_it_may_take_each_with_its_own_seed(
+    workers: int, chains: int | None, solves: int, expected: int, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """One chain per core the solve has (``ctx.workers``) unless the config says how many;
-    chain 0 has the turn's seed (one chain: the single search's), the others seeds of their
-    own; the turns still return a valid answer no worse than their start."""
+    """One chain per core of the solve's share while ``solves`` solves are under way
+    (:func:`~service.core.threads.cores_per_solve`), never fewer than its ``ctx.workers``,
+    unless the config says how many; chain 0 has the turn's seed (one chain: the single
+    search's), the others seeds of their own; the turns still return a valid answer no
+    worse than their start."""
     seeds: list[int] = []
 
     def recorded(ctx, start, until, seed, **kwargs):
@@ -155,13 +172,42 @@ def test_a_turn_runs_one_reinsertion_chain_per_core_each_with_its_own_seed(
     ctx, start, cost = _wh50()
     ctx = replace(ctx, workers=workers)
     config = TurnsConfig(turn_s=0.05, cooling_share=1.0, chains=chains)
-    found = take_turns(ctx, start, cost, time.monotonic() + 0.3, 7, config)
+    with ExitStack() as under_way:
+        for _ in range(solves):
+            under_way.enter_context(solving())
+        found = take_turns(ctx, start, cost, time.monotonic() + 0.3, 7, config)
     assert found.cost <= cost
     _assert_valid(ctx, found.best, found.cost)
     assert len(seeds) == expected * found.turns
     by_turn = [sorted(seeds[k : k + expected]) for k in range(0, len(seeds), expected)]
     stride = turns.CHAIN_SEED_STRIDE
     assert by_turn == [[7 + t + k * stride for k in range(expected)] for t in range(found.turns)]
+
+
+@pytest.mark.skipif(CORES < 2, reason="one core: one chain whatever runs")
+def test_a_solve_arriving_during_the_turns_takes_its_share_from_the_next_turn(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The turns read the cores they may take at each turn: every core while alone, the
+    solve's share once another solve is under way, every core again once it ended."""
+    chains_by_turn: list[int] = []
+    under_way = ExitStack()
+
+    def recorded(ctx, start, until, seed, cooling, pool, chains):
+        chains_by_turn.append(chains)
+        if len(chains_by_turn) == 2:
+            under_way.enter_context(solving())  # this solve's count
+            under_way.enter_context(solving())  # another arrives
+        if len(chains_by_turn) == 4:
+            under_way.close()
+        return turns_reinsertion(ctx, start, until, seed, cooling, pool, chains)
+
+    monkeypatch.setattr(turns, "_reinsertion", recorded)
+    ctx, start, cost = _wh50()
+    take_turns(ctx, start, cost, time.monotonic() + 0.4, 0, TurnsConfig(turn_s=0.05))
+    under_way.close()
+    share = CORES // 2
+    assert chains_by_turn[:5] == [CORES, CORES, share, share, CORES]
 
 
 def test_a_turn_goes_on_from_its_cheapest_chain_the_first_of_equals(
