@@ -1,16 +1,20 @@
-"""Re-insertion search in turns: restarted from the best answer each turn, a chain per free core.
+"""Re-insertion search in turns: a chain per free core, each restarted from its own best each turn.
 
 ``auto``'s large stage (:mod:`service.solvers.portfolio`) runs re-insertion search
 (:mod:`service.solvers.reinsert`) in turns of at most ``turn_s`` and ``turn_share`` of
-the time given. Each turn starts from the best answer so far, so an annealed search that
-wandered off while hot comes back to it; with several cores a turn runs one search per
-core at once, each with a seed of its own, and the cheapest goes on: the turns are where
-the chains meet. The cores are those the solve may take at that turn: its share of the
-machine among the solves under way (:func:`~service.core.threads.cores_per_solve`), so a
-lone request searches on every core whatever its ``workers``, and one that arrives while
-it searches gets its share from the next turn on. Every turn's search cools over the same
-span (the first COOLED_SHARE of the time, and all but MOST_COLD_S at least), then searches
-cold.
+the time given. Each turn of a chain starts from that chain's best answer so far, so an
+annealed search that wandered off while hot comes back to it. With several cores a turn
+runs one chain per core at once, each with a seed of its own, and the chains never meet:
+each is a lineage of its own, and the turns answer the cheapest lineage's best. Runs of
+one search end in basins far apart (docs/benchmarks.md, sessions 59 and 64), and
+lineages kept apart sample more of them than chains restarted from the cheapest of a turn
+(as from session 44 to 64: see TurnsConfig.chains). The cores are those the solve may take at that
+turn: its share of the machine among the solves under way
+(:func:`~service.core.threads.cores_per_solve`), so a lone request searches on every core
+whatever its ``workers``, and one that arrives while it searches gets its share from the
+next turn on (the dearest lineages stop; where cores free up, new lineages start from the
+cheapest answer). Every turn's search cools over the same span (the first COOLED_SHARE
+of the time, and all but MOST_COLD_S at least), then searches cold.
 
 Robot-priority search (:mod:`service.solvers.priority`) took a part of every cold turn
 from session 26 to session 50 (its part following the cost each search took off per
@@ -103,7 +107,17 @@ class TurnsConfig:
     # 0.9346 (12 cheaper, 18 dearer of 30 with one; floor_dense 100 0.960 / 0.989,
     # wh_two_way 250 0.847 / 0.858), 5 s 0.9755 / 0.9776 (14 / 15; wh_two_lane 250 0.975 /
     # 0.988, but wh_two_way 100 0.986 / 0.959, dearer in 6 of 6: at 100 robots each of two
-    # chains takes 0.70-0.83 of one chain's steps, at 250 no fewer).
+    # chains takes 0.70-0.83 of one chain's steps, at 250 no fewer). Since session 64 the
+    # chains are lineages that never meet (see the module). Measured (``python -m bench.ab
+    # --b service.solvers.turns.TurnsConfig.independent=True``, an ad hoc flag: each chain
+    # its own turns to the deadline, the cheapest answer kept; against the cheapest chain of
+    # each turn going on in both, two chains on one worker's ``auto``; the kinds above,
+    # three worlds, two seeds): 1 s 0.9302 / 0.9333 (9 cheaper, 21 dearer of 30 merged;
+    # wh_two_lane 250 0.904 / 0.918), 5 s 0.9770 / 0.9829 (13 / 16; wh_two_way 100 0.977 /
+    # 0.988); other worlds (``--seed 600000``, wh_two_way, wh_two_lane, floor_dense,
+    # wh_mixed of 100, wh_two_way, wh_one_way, wh_mixed of 250, two worlds, two seeds) 1 s
+    # 0.9801 / 0.9823 (11 / 17), 5 s 0.9889 / 0.9875 (14 / 12; wh_one_way 250 0.987 /
+    # 0.978, dearer in 4 of 4, wh_mixed 250 0.984 / 0.973, the 100-robot kinds better).
     chains: int | None = None
 
 
@@ -124,12 +138,14 @@ def take_turns(
     config: TurnsConfig | None = None,
 ) -> TurnsResult:
     """Re-insertion search in turns from the valid ``start`` (of ``cost``) until
-    ``deadline`` (monotonic), each turn from the best answer so far with the next seed, in
-    ``config.chains`` threads (by default one per core the solve may take at that turn, at
-    least ``ctx.workers``: see TurnsConfig.chains). ``config`` None:
-    TurnsConfig's defaults, read at the call (so that ``bench.ab`` can vary them)."""
+    ``deadline`` (monotonic): ``config.chains`` lineages at once (by default one per core
+    the solve may take at that turn, at least ``ctx.workers``: see TurnsConfig.chains),
+    each turn of each from its own best answer so far with the turn's seed (lineage k's
+    plus k times CHAIN_SEED_STRIDE) -> the cheapest lineage's best (the first of equals).
+    ``config`` None: TurnsConfig's defaults, read at the call (so that ``bench.ab`` can
+    vary them)."""
     config = TurnsConfig() if config is None else config
-    best, turns = start, 0
+    lineages, turns = [ReinsertResult(start, cost, 0)], 0
     now = time.monotonic()
     turn_s = min(config.turn_s, config.turn_share * (deadline - now))
     cold_s = min((1 - config.cooling_share) * (deadline - now), config.most_cold_s)
@@ -139,32 +155,42 @@ def take_turns(
         while (began := time.monotonic()) < deadline:
             until = min(deadline, began + turn_s)
             chains = config.chains or max(ctx.workers, cores_per_solve())
-            found = _reinsertion(
-                ctx, best, until, seed + turns, cooling, pool if chains > 1 else None, chains
-            )
-            best, cost, turns = found.best, found.cost, turns + 1
-    return TurnsResult(best, cost, turns)
+            starts = [line.best for line in _as_many(lineages, chains)]
+            lineages = _reinsertion(ctx, starts, until, seed + turns, cooling, pool)
+            turns += 1
+    best = min(lineages, key=lambda line: line.cost)
+    return TurnsResult(best.best, best.cost, turns)
+
+
+def _as_many(lineages: list[ReinsertResult], n: int) -> list[ReinsertResult]:
+    """``n`` lineages from ``lineages``: the cheapest n in their order where there are more
+    (the dearest stop), else all and then copies of the cheapest (new lineages start from
+    the best answer so far)."""
+    if len(lineages) > n:
+        kept = sorted(range(len(lineages)), key=lambda k: lineages[k].cost)[:n]
+        return [lineages[k] for k in sorted(kept)]
+    cheapest = min(lineages, key=lambda line: line.cost)
+    return lineages + [cheapest] * (n - len(lineages))
 
 
 def _reinsertion(
     ctx: SolveContext,
-    start: Assignments,
+    starts: list[Assignments],
     until: float,
     seed: int,
     cooling: tuple[float, float],
     pool: ThreadPoolExecutor | None,
-    chains: int,
-) -> ReinsertResult:
-    """A turn's re-insertion search from ``start`` until ``until`` (monotonic), cooling over
-    ``cooling``: ``chains`` searches at once in ``pool``'s threads (None: one, in this
-    thread), chain k with ``seed`` + k * CHAIN_SEED_STRIDE -> the cheapest result (the
-    first of equals: chain 0 is the single search's)."""
-    if pool is None:
-        return reinsert_search(ctx, start, until, seed, cooling=cooling)
+) -> list[ReinsertResult]:
+    """A turn's re-insertion searches until ``until`` (monotonic), cooling over
+    ``cooling``: search k from ``starts[k]`` with ``seed`` + k * CHAIN_SEED_STRIDE, all at
+    once in ``pool``'s threads (None: one search, in this thread) -> their results in
+    that order."""
+    if pool is None or len(starts) == 1:
+        return [reinsert_search(ctx, starts[0], until, seed, cooling=cooling)]
     runs = [
         pool.submit(
             reinsert_search, ctx, start, until, seed + k * CHAIN_SEED_STRIDE, cooling=cooling
         )
-        for k in range(chains)
+        for k, start in enumerate(starts)
     ]
-    return min((run.result() for run in runs), key=lambda found: found.cost)
+    return [run.result() for run in runs]

@@ -8,7 +8,6 @@ from __future__ import annotations
 import json
 import os
 import time
-from concurrent.futures import ThreadPoolExecutor
 from contextlib import ExitStack
 from dataclasses import replace
 
@@ -125,9 +124,13 @@ def test_each_turn_starts_from_the_best_answer_so_far(
 
     monkeypatch.setattr(turns, "reinsert_search", recorded)
     returned: list[ReinsertResult] = []
-    monkeypatch.setattr(
-        turns, "_reinsertion", lambda *a: returned.append(turns_reinsertion(*a)) or returned[-1]
-    )
+
+    def one_chain(*args):
+        (result,) = turns_reinsertion(*args)
+        returned.append(result)
+        return [result]
+
+    monkeypatch.setattr(turns, "_reinsertion", one_chain)
     config = TurnsConfig(turn_s=0.05, chains=1)
     found = take_turns(ctx, start, cost, time.monotonic() + 0.3, 11, config)
     assert found.turns == len(starts) == len(returned) >= 3
@@ -193,14 +196,14 @@ def test_a_solve_arriving_during_the_turns_takes_its_share_from_the_next_turn(
     chains_by_turn: list[int] = []
     under_way = ExitStack()
 
-    def recorded(ctx, start, until, seed, cooling, pool, chains):
-        chains_by_turn.append(chains)
+    def recorded(ctx, starts, until, seed, cooling, pool):
+        chains_by_turn.append(len(starts))
         if len(chains_by_turn) == 2:
             under_way.enter_context(solving())  # this solve's count
             under_way.enter_context(solving())  # another arrives
         if len(chains_by_turn) == 4:
             under_way.close()
-        return turns_reinsertion(ctx, start, until, seed, cooling, pool, chains)
+        return turns_reinsertion(ctx, starts, until, seed, cooling, pool)
 
     monkeypatch.setattr(turns, "_reinsertion", recorded)
     ctx, start, cost = _wh50()
@@ -210,21 +213,48 @@ def test_a_solve_arriving_during_the_turns_takes_its_share_from_the_next_turn(
     assert chains_by_turn[:5] == [CORES, CORES, share, share, CORES]
 
 
-def test_a_turn_goes_on_from_its_cheapest_chain_the_first_of_equals(
+def test_each_chain_goes_on_from_its_own_best_and_the_cheapest_lineage_is_the_answer(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    """Of a turn's chains the cheapest result goes on; of equals, chain 0's."""
+    """Chains never meet: a chain's next turn starts from what its own last turn returned,
+    not from the cheapest of the turn; the turns answer the cheapest lineage's best (the
+    first of equals)."""
     ctx, start, cost = _wh50()
-    costs = {0: 5.0, turns.CHAIN_SEED_STRIDE: 3.0, 2 * turns.CHAIN_SEED_STRIDE: 3.0}
+    starts: list[list[Assignments]] = []
+    returned: list[list[ReinsertResult]] = []
 
-    def fake(ctx, start, until, seed, **kwargs):
-        return ReinsertResult(start, costs[seed], seed)  # steps: which chain
+    def fake(ctx, starts_, until, seed, cooling, pool):
+        time.sleep(max(0.0, until - time.monotonic()))
+        turn = len(starts)
+        starts.append(starts_)
+        # chain 0 cheaper on the first turn, chain 1 from then on, equal on the last ones
+        costs = [10.0 - turn, 11.0 - 2 * turn]
+        results = [
+            ReinsertResult(Assignments(start.a_first.copy(), start.following.copy()), c, k)
+            for k, c in enumerate(costs[: len(starts_)])
+        ]
+        returned.append(results)
+        return results
 
-    monkeypatch.setattr(turns, "reinsert_search", fake)
-    with ThreadPoolExecutor(3) as pool:
-        found = turns._reinsertion(ctx, start, time.monotonic(), 0, (0.0, 1.0), pool, 3)
-    assert (found.cost, found.steps) == (3.0, turns.CHAIN_SEED_STRIDE)
-    costs[0] = 3.0
-    with ThreadPoolExecutor(3) as pool:
-        found = turns._reinsertion(ctx, start, time.monotonic(), 0, (0.0, 1.0), pool, 3)
-    assert found.steps == 0
+    monkeypatch.setattr(turns, "_reinsertion", fake)
+    found = take_turns(ctx, start, cost, time.monotonic() + 0.25, 0, TurnsConfig(turn_s=0.05))
+    assert len(starts) == found.turns >= 3
+    chains = len(starts[0])
+    assert all(first is start for first in starts[0])
+    for turn in range(1, found.turns):
+        assert len(starts[turn]) == chains
+        for k in range(chains):
+            assert starts[turn][k] is returned[turn - 1][k].best  # its own lineage's
+    last = returned[-1]
+    cheapest = min(last, key=lambda line: line.cost)  # the first of equals
+    assert (found.best, found.cost) == (cheapest.best, cheapest.cost)
+
+
+def test_lineages_stop_dearest_first_and_new_ones_start_from_the_cheapest() -> None:
+    """Fewer cores: the cheapest lineages go on, in their order; more: every lineage goes
+    on and new ones start from the cheapest answer."""
+    a, b, c = (ReinsertResult(object(), cost, 0) for cost in (3.0, 1.0, 2.0))  # type: ignore[arg-type]
+    assert turns._as_many([a, b, c], 2) == [b, c]
+    assert turns._as_many([a, b, c], 1) == [b]
+    assert turns._as_many([a, b], 4) == [a, b, b, b]
+    assert turns._as_many([a], 1) == [a]
