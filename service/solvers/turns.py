@@ -87,37 +87,34 @@ class TurnsConfig:
     # most_cold_s where that is more), and searches cold for the rest (see COOLED_SHARE).
     cooling_share: float = COOLED_SHARE
     most_cold_s: float = MOST_COLD_S  # ... for this many seconds at most (see MOST_COLD_S)
-    # Re-insertion searches a turn runs at once, each in a thread from the best answer so far
-    # with a seed of its own; the cheapest goes on (None: one per core the solve may take at
-    # that turn, ``threads.cores_per_solve``, and ``SolveContext.workers`` at least; until
-    # session 64 its ``workers`` alone, so the service's default of one worker per solve,
-    # two solves at once, left a lone request's second core idle). A step's kernels
-    # release the GIL, the Python between them does not: two threads took 1.43-1.9x the
-    # steps of one (session 30). Measured (session
-    # 44, ``python -m bench.ab``, two chains against one on one solve's two cores; 1 s,
-    # generated warehouses of 100 and 250 robots, three worlds a kind, two seeds, cost
-    # ratio): with ``--method auto_2cores`` the two-way and two-lane kinds 0.8892 / 0.8829
-    # (14 cheaper, 10 dearer of 24), other worlds of those and of wh_one_way and wh_mixed 250
-    # (seeds from 2,000) 0.9805 / 0.9688 (21 / 15); two threads forced on one worker's
-    # ``auto``: 0.9006 / 0.8954 (15 / 9), seeds from 1,000 0.9800 / 0.9626 (25 / 11); 5 s
-    # 0.9587 / 0.9556 (12 / 12). Again in session 64 (``python -m bench.ab --b
-    # service.solvers.turns.TurnsConfig.chains=2``: ``auto`` of one worker as the service
-    # runs a lone request, one chain against two; wh_two_way, wh_two_lane, floor_dense of
-    # 100 and wh_two_way, wh_two_lane of 250 robots, three worlds, two seeds): 1 s 0.9266 /
-    # 0.9346 (12 cheaper, 18 dearer of 30 with one; floor_dense 100 0.960 / 0.989,
-    # wh_two_way 250 0.847 / 0.858), 5 s 0.9755 / 0.9776 (14 / 15; wh_two_lane 250 0.975 /
-    # 0.988, but wh_two_way 100 0.986 / 0.959, dearer in 6 of 6: at 100 robots each of two
-    # chains takes 0.70-0.83 of one chain's steps, at 250 no fewer). Since session 64 the
-    # chains are lineages that never meet (see the module). Measured (``python -m bench.ab
-    # --b service.solvers.turns.TurnsConfig.independent=True``, an ad hoc flag: each chain
-    # its own turns to the deadline, the cheapest answer kept; against the cheapest chain of
-    # each turn going on in both, two chains on one worker's ``auto``; the kinds above,
-    # three worlds, two seeds): 1 s 0.9302 / 0.9333 (9 cheaper, 21 dearer of 30 merged;
-    # wh_two_lane 250 0.904 / 0.918), 5 s 0.9770 / 0.9829 (13 / 16; wh_two_way 100 0.977 /
-    # 0.988); other worlds (``--seed 600000``, wh_two_way, wh_two_lane, floor_dense,
-    # wh_mixed of 100, wh_two_way, wh_one_way, wh_mixed of 250, two worlds, two seeds) 1 s
-    # 0.9801 / 0.9823 (11 / 17), 5 s 0.9889 / 0.9875 (14 / 12; wh_one_way 250 0.987 /
-    # 0.978, dearer in 4 of 4, wh_mixed 250 0.984 / 0.973, the 100-robot kinds better).
+    # Re-insertion searches a turn runs at once, each in a thread from its own lineage's best answer
+    # so far with a seed of its own (see the module; None: one per core the solve may take at that
+    # turn, ``threads.cores_per_solve``, and ``SolveContext.workers`` at least; until session 64 its
+    # ``workers`` alone, so the service's default of one worker per solve, two solves at once, left
+    # a lone request's second core idle). A step's kernels release the GIL, the Python between them
+    # does not: two threads took 1.43-1.9x the steps of one (session 30). Measured (session 44,
+    # ``python -m bench.ab``, two chains against one on one solve's two cores; 1 s, generated
+    # warehouses of 100 and 250 robots, three worlds a kind, two seeds, cost ratio): with ``--method
+    # auto_2cores`` the two-way and two-lane kinds 0.8892 / 0.8829 (14 cheaper, 10 dearer of 24),
+    # other worlds of those and of wh_one_way and wh_mixed 250 (seeds from 2,000) 0.9805 / 0.9688
+    # (21 / 15); two threads forced on one worker's ``auto``: 0.9006 / 0.8954 (15 / 9), seeds from
+    # 1,000 0.9800 / 0.9626 (25 / 11); 5 s 0.9587 / 0.9556 (12 / 12). Again in session 64 (``python
+    # -m bench.ab --b service.solvers.turns.TurnsConfig.chains=2``: ``auto`` of one worker as the
+    # service runs a lone request, one chain against two; wh_two_way, wh_two_lane, floor_dense of
+    # 100 and wh_two_way, wh_two_lane of 250 robots, three worlds, two seeds): 1 s 0.9266 / 0.9346
+    # (12 cheaper, 18 dearer of 30 with one; floor_dense 100 0.960 / 0.989, wh_two_way 250 0.847 /
+    # 0.858), 5 s 0.9755 / 0.9776 (14 / 15; wh_two_lane 250 0.975 / 0.988, but wh_two_way 100 0.986
+    # / 0.959, dearer in 6 of 6: at 100 robots each of two chains takes 0.70-0.83 of one chain's
+    # steps, at 250 no fewer). Since session 64 the chains are lineages that never meet (see the
+    # module). Measured (``python -m bench.ab --b
+    # service.solvers.turns.TurnsConfig.independent=True``, an ad hoc flag: each chain its own turns
+    # to the deadline, the cheapest answer kept; against the cheapest chain of each turn going on in
+    # both, two chains on one worker's ``auto``; the kinds above, three worlds, two seeds): 1 s
+    # 0.9302 / 0.9333 (9 cheaper, 21 dearer of 30 merged; wh_two_lane 250 0.904 / 0.918), 5 s 0.9770
+    # / 0.9829 (13 / 16; wh_two_way 100 0.977 / 0.988); other worlds (``--seed 600000``, wh_two_way,
+    # wh_two_lane, floor_dense, wh_mixed of 100, wh_two_way, wh_one_way, wh_mixed of 250, two
+    # worlds, two seeds) 1 s 0.9801 / 0.9823 (11 / 17), 5 s 0.9889 / 0.9875 (14 / 12; wh_one_way 250
+    # 0.987 / 0.978, dearer in 4 of 4, wh_mixed 250 0.984 / 0.973, the 100-robot kinds better).
     chains: int | None = None
 
 

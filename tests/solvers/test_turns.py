@@ -11,6 +11,7 @@ import time
 from contextlib import ExitStack
 from dataclasses import replace
 
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -250,10 +251,13 @@ def test_each_chain_goes_on_from_its_own_best_and_the_cheapest_lineage_is_the_an
     assert (found.best, found.cost) == (cheapest.best, cheapest.cost)
 
 
+FLAGS = (np.zeros(1, dtype=bool), np.zeros(1, dtype=bool))  # a one-conflict answer
+
+
 def test_lineages_stop_dearest_first_and_new_ones_start_from_the_cheapest() -> None:
     """Fewer cores: the cheapest lineages go on, in their order; more: every lineage goes
     on and new ones start from the cheapest answer."""
-    a, b, c = (ReinsertResult(object(), cost, 0) for cost in (3.0, 1.0, 2.0))  # type: ignore[arg-type]
+    a, b, c = (ReinsertResult(Assignments.single(*FLAGS), cost, 0) for cost in (3.0, 1.0, 2.0))
     assert turns._as_many([a, b, c], 2) == [b, c]
     assert turns._as_many([a, b, c], 1) == [b]
     assert turns._as_many([a, b], 4) == [a, b, b, b]
