@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import logging
-import os
 import sys
 import time
 from collections.abc import Callable
@@ -20,6 +19,7 @@ from service.core.cliques import CliqueBound, TooManyCliques, clique_budget
 from service.core.path_schemas import PathsRequest
 from service.core.problem import ProblemError
 from service.core.schemas import OBJECTIVES, OptionsIn, ScheduleRequest, SolverName
+from service.core.threads import available_cores
 from service.geometry.graph import GeometrySettings
 from service.memory import settle
 from service.motion.plan import derived_request, plan_paths
@@ -195,7 +195,7 @@ def build_runtime(settings: Settings) -> Runtime:
         settings.retry_after_s,
         CliqueBound(settings.max_cliques, settings.max_clique_incidences),
     )
-    cores_per_solve = max(1, (os.cpu_count() or 1) // settings.solve_concurrency)
+    cores_per_solve = max(1, available_cores() // settings.solve_concurrency)
     return Runtime(
         dispatch_policy(settings),
         pool,

@@ -16,16 +16,26 @@ a lone request gets the whole machine, two at once on two cores one core each.
 
 from __future__ import annotations
 
+import math
 import os
 import threading
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
+from pathlib import Path
 from typing import TypeVar
 
 import numpy as np
 
-__all__ = ["balanced_cuts", "cores_per_solve", "in_parts", "parts_for", "shared_pool", "solving"]
+__all__ = [
+    "available_cores",
+    "balanced_cuts",
+    "cores_per_solve",
+    "in_parts",
+    "parts_for",
+    "shared_pool",
+    "solving",
+]
 
 A = TypeVar("A")
 T = TypeVar("T")
@@ -36,12 +46,45 @@ _pool: tuple[int, ThreadPoolExecutor] | None = None
 _pool_lock = threading.Lock()
 
 
+# Where a cgroup states this process's CPU quota: v2 ("<quota> <period>" or "max <period>"),
+# v1 (quota, -1 for none, and period in two files).
+CGROUP_V2_CPU_MAX = Path("/sys/fs/cgroup/cpu.max")
+CGROUP_V1_CPU = (
+    Path("/sys/fs/cgroup/cpu/cpu.cfs_quota_us"),
+    Path("/sys/fs/cgroup/cpu/cpu.cfs_period_us"),
+)
+
+
+def available_cores() -> int:
+    """The cores this process may run on: those of its CPU affinity, fewer where a cgroup's
+    CPU quota allows less (a container limited to 2 CPUs on a 64-core host: 2, where
+    ``os.cpu_count()`` says 64 and threads sized by it would each get a thirty-second)."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    quota = _cgroup_quota()
+    return max(1, min(cores or 1, math.ceil(quota) if quota is not None else cores or 1))
+
+
+def _cgroup_quota() -> float | None:
+    """CPUs the cgroup quota allows (quota over period), None where none is set or read."""
+    try:
+        if CGROUP_V2_CPU_MAX.exists():
+            quota, period = CGROUP_V2_CPU_MAX.read_text().split()[:2]
+            return None if quota == "max" else int(quota) / int(period)
+        quota_file, period_file = CGROUP_V1_CPU
+        if quota_file.exists() and period_file.exists():
+            quota_us = int(quota_file.read_text())
+            return None if quota_us <= 0 else quota_us / int(period_file.read_text())
+    except (OSError, ValueError):
+        return None
+    return None
+
+
 def shared_pool() -> ThreadPoolExecutor:
     """This process's pool (threads are started on demand, up to the core count)."""
     global _pool
     with _pool_lock:
         if _pool is None or _pool[0] != os.getpid():
-            pool = ThreadPoolExecutor(os.cpu_count(), thread_name_prefix="kernel")
+            pool = ThreadPoolExecutor(available_cores(), thread_name_prefix="kernel")
             _pool = (os.getpid(), pool)
         return _pool[1]
 
@@ -79,13 +122,13 @@ def cores_per_solve() -> int:
     arriving while another searches on every core gets its share from the next turn on."""
     with _solves_lock:
         running = max(_solves, 1)
-    return max(1, (os.cpu_count() or 1) // running)
+    return max(1, available_cores() // running)
 
 
 def parts_for(work: int, least_work: int) -> int:
     """How many parts ``work`` is worth cutting into: one per core at most, and none
     smaller than ``least_work`` (below it, handing a part over costs more than it saves)."""
-    return max(1, min(os.cpu_count() or 1, work // max(least_work, 1)))
+    return max(1, min(available_cores(), work // max(least_work, 1)))
 
 
 def balanced_cuts(weight: np.ndarray, parts: int, allowed: np.ndarray | None = None) -> list[int]:

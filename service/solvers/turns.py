@@ -33,7 +33,6 @@ runs cheaper without), other worlds 0.9714 -> 0.9779 (19 / 17), avg_delay 0.8840
 
 from __future__ import annotations
 
-import os
 import time
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import nullcontext
@@ -41,7 +40,7 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 from service.core.assignment import Assignments
-from service.core.threads import cores_per_solve
+from service.core.threads import available_cores, cores_per_solve
 from service.solvers.registry import SolveContext
 from service.solvers.reinsert import ReinsertResult, reinsert_search
 
@@ -147,7 +146,7 @@ def take_turns(
     turn_s = min(config.turn_s, config.turn_share * (deadline - now))
     cold_s = min((1 - config.cooling_share) * (deadline - now), config.most_cold_s)
     cooling = (now, deadline - cold_s)  # then it searches cold
-    most = config.chains or max(ctx.workers, os.cpu_count() or 1)
+    most = config.chains or max(ctx.workers, available_cores())
     with ThreadPoolExecutor(most) if most > 1 else nullcontext() as pool:
         while (began := time.monotonic()) < deadline:
             until = min(deadline, began + turn_s)

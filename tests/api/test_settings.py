@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
 
@@ -11,6 +10,7 @@ from pydantic import ValidationError
 
 from service.api.runtime import build_runtime, dispatch_policy
 from service.core.cliques import CliqueBound
+from service.core.threads import available_cores
 from service.settings import MIB, Settings, get_settings
 from service.solvers.dispatch import DispatchPolicy
 
@@ -81,7 +81,7 @@ def test_runtime_follows_settings() -> None:
     assert (pool.queue_size, pool.retry_after_s) == (5, 7)
     assert pool.clique_bound == CliqueBound(cliques=98, incidences=99)
     assert pool.slots.total_tokens == 3
-    assert runtime.torch_threads == max(1, (os.cpu_count() or 1) // 3)
+    assert runtime.torch_threads == max(1, available_cores() // 3)
     assert build_runtime(Settings(torch_threads=5)).torch_threads == 5
 
 

@@ -6,7 +6,6 @@ solve's share of the machine, read at each turn."""
 from __future__ import annotations
 
 import json
-import os
 import time
 from contextlib import ExitStack
 from dataclasses import replace
@@ -18,7 +17,7 @@ from hypothesis import strategies as st
 
 from service.core.assignment import Assignments
 from service.core.check import check
-from service.core.threads import solving
+from service.core.threads import available_cores, solving
 from service.solvers import turns
 from service.solvers.registry import SolveContext
 from service.solvers.reinsert import ReinsertResult, reinsert_search
@@ -144,7 +143,7 @@ def test_each_turn_starts_from_the_best_answer_so_far(
     _assert_valid(ctx, found.best, found.cost)
 
 
-CORES = os.cpu_count() or 1
+CORES = available_cores()
 
 
 @pytest.mark.parametrize(
