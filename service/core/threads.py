@@ -59,9 +59,14 @@ def available_cores() -> int:
     """The cores this process may run on: those of its CPU affinity, fewer where a cgroup's
     CPU quota allows less (a container limited to 2 CPUs on a 64-core host: 2, where
     ``os.cpu_count()`` says 64 and threads sized by it would each get a thirty-second)."""
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    if hasattr(os, "sched_getaffinity"):
+        cores = len(os.sched_getaffinity(0))
+    else:
+        cores = os.cpu_count() or 1
     quota = _cgroup_quota()
-    return max(1, min(cores or 1, math.ceil(quota) if quota is not None else cores or 1))
+    if quota is not None:
+        cores = min(cores, math.ceil(quota))
+    return max(1, cores)
 
 
 def _cgroup_quota() -> float | None:
