@@ -4,12 +4,15 @@
 (:mod:`service.solvers.reinsert`) in turns of at most ``turn_s`` and ``turn_share`` of
 the time given. Each turn of a chain starts from that chain's best answer so far, so an
 annealed search that wandered off while hot comes back to it. With several cores a turn
-runs one chain per core at once, each with a seed of its own, and the chains never meet:
-each is a lineage of its own, and the turns answer the cheapest lineage's best. Runs of
-one search end in basins far apart (docs/benchmarks.md, sessions 59 and 64), and
-lineages kept apart sample more of them than chains restarted from the cheapest of a turn
-(as from session 44 to 64: see TurnsConfig.chains). The cores are those the solve may take at that
-turn: its share of the machine among the solves under way
+runs one chain per core at once, each with a seed of its own, and each chain is a
+lineage of its own: its next turn starts from its own best, and the turns answer the
+cheapest lineage's best. Runs of one search end in basins far apart (docs/benchmarks.md,
+sessions 59 and 64), and lineages kept apart sample more of them than chains restarted
+from the cheapest of a turn (as from session 44 to 64: see TurnsConfig.chains). A
+lineage whose turn found nothing cheaper than its start has stalled in its basin: it
+goes on from the cheapest lineage's best, with its own seed (TurnsConfig.meet_stalled),
+so that no core keeps searching a basin that gave up. The cores are those the solve may
+take at that turn: its share of the machine among the solves under way
 (:func:`~service.core.threads.cores_per_solve`), so a lone request searches on every core
 whatever its ``workers``, and one that arrives while it searches gets its share from the
 next turn on (the dearest lineages stop; where cores free up, new lineages start from the
@@ -105,7 +108,7 @@ class TurnsConfig:
     # 0.858), 5 s 0.9755 / 0.9776 (14 / 15; wh_two_lane 250 0.975 / 0.988, but wh_two_way 100 0.986
     # / 0.959, dearer in 6 of 6: at 100 robots each of two chains takes 0.70-0.83 of one chain's
     # steps, at 250 no fewer). Since session 64 the chains are lineages that never meet (see the
-    # module). Measured (``python -m bench.ab --b
+    # module; since session 65, unless one stalls: meet_stalled). Measured (``python -m bench.ab --b
     # service.solvers.turns.TurnsConfig.independent=True``, an ad hoc flag: each chain its own turns
     # to the deadline, the cheapest answer kept; against the cheapest chain of each turn going on in
     # both, two chains on one worker's ``auto``; the kinds above, three worlds, two seeds): 1 s
@@ -115,6 +118,18 @@ class TurnsConfig:
     # worlds, two seeds) 1 s 0.9801 / 0.9823 (11 / 17), 5 s 0.9889 / 0.9875 (14 / 12; wh_one_way 250
     # 0.987 / 0.978, dearer in 4 of 4, wh_mixed 250 0.984 / 0.973, the 100-robot kinds better).
     chains: int | None = None
+    # Whether a lineage whose turn found nothing cheaper than its start goes on from the
+    # cheapest lineage's best (see the module). Measured (session 65, ``python -m bench.ab
+    # --b service.solvers.turns.TurnsConfig.meet_stalled=True`` while False was the default:
+    # against lineages that never meet, ``auto`` of one worker on two cores; wh_two_way,
+    # wh_two_lane, floor_dense of 100, wh_two_way, wh_two_lane, wh_one_way, wh_mixed of 250
+    # robots, two worlds, two seeds; cost ratio, runs cheaper / dearer meeting): 1 s 0.9485 /
+    # 0.9522 (16 / 9; wh_two_way 250 0.874 / 0.883, 4 / 0), 5 s 0.9779 / 0.9839 (17 / 9;
+    # wh_one_way 250 0.970 / 0.992, 4 / 0); other worlds (``--seed 600000``: wh_two_way,
+    # wh_two_lane, wh_mixed of 100, floor_dense of 50, wh_two_way, wh_one_way, wh_mixed of
+    # 250) 1 s 0.9817 / 0.9826 (14 / 9), 5 s 0.9866 / 0.9895 (12 / 12; wh_mixed 250 0.986 /
+    # 0.996, 4 / 0, floor_dense 50 0.996 / 0.986, 0 / 2).
+    meet_stalled: bool = True
 
 
 class TurnsResult(NamedTuple):
@@ -137,7 +152,9 @@ def take_turns(
     ``deadline`` (monotonic): ``config.chains`` lineages at once (by default one per core
     the solve may take at that turn, at least ``ctx.workers``: see TurnsConfig.chains),
     each turn of each from its own best answer so far with the turn's seed (lineage k's
-    plus k times CHAIN_SEED_STRIDE) -> the cheapest lineage's best (the first of equals).
+    plus k times CHAIN_SEED_STRIDE), or from the cheapest lineage's where its last turn
+    found nothing cheaper (``config.meet_stalled``) -> the cheapest lineage's best (the
+    first of equals).
     ``config`` None: TurnsConfig's defaults, read at the call (so that ``bench.ab`` can
     vary them)."""
     config = TurnsConfig() if config is None else config
@@ -151,8 +168,11 @@ def take_turns(
         while (began := time.monotonic()) < deadline:
             until = min(deadline, began + turn_s)
             chains = config.chains or max(ctx.workers, cores_per_solve())
-            starts = [line.best for line in _as_many(lineages, chains)]
+            began_from = _as_many(lineages, chains)
+            starts = [line.best for line in began_from]
             lineages = _reinsertion(ctx, starts, until, seed + turns, cooling, pool)
+            if config.meet_stalled:
+                lineages = _stalled_met(began_from, lineages)
             turns += 1
     best = min(lineages, key=lambda line: line.cost)
     return TurnsResult(best.best, best.cost, turns)
@@ -167,6 +187,19 @@ def _as_many(lineages: list[ReinsertResult], n: int) -> list[ReinsertResult]:
         return [lineages[k] for k in sorted(kept)]
     cheapest = min(lineages, key=lambda line: line.cost)
     return lineages + [cheapest] * (n - len(lineages))
+
+
+def _stalled_met(
+    began_from: list[ReinsertResult], ended: list[ReinsertResult]
+) -> list[ReinsertResult]:
+    """The lineages after a turn that ``began_from`` those and ``ended`` with these (in
+    the same order): each that found nothing cheaper replaced by the cheapest (the first of
+    equals)."""
+    cheapest = min(ended, key=lambda line: line.cost)
+    return [
+        cheapest if end.cost >= began.cost else end
+        for began, end in zip(began_from, ended, strict=True)
+    ]
 
 
 def _reinsertion(

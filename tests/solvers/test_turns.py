@@ -250,6 +250,65 @@ def test_each_chain_goes_on_from_its_own_best_and_the_cheapest_lineage_is_the_an
     assert (found.best, found.cost) == (cheapest.best, cheapest.cost)
 
 
+def test_a_lineage_that_stalled_goes_on_from_the_cheapest_lineage(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A chain whose turn returned nothing cheaper than its start begins its next turn
+    from the cheapest lineage's best, the others from their own; with ``meet_stalled``
+    off, every chain from its own."""
+    ctx, start, cost = _wh50()
+    # what each chain's turn takes off its start's cost: chain 0 stalls on turn 1, chain 1
+    # on turns 2, 3, ...
+    gains = [[1.0, 3.0], [0.0, 1.0]] + [[0.5, 0.0]] * 100
+
+    def run(config: TurnsConfig) -> tuple[list[list[Assignments]], list[list[ReinsertResult]]]:
+        starts: list[list[Assignments]] = []
+        returned: list[list[ReinsertResult]] = []
+        costs = {id(start): cost}
+
+        def fake(ctx, starts_, until, seed, cooling, pool):
+            time.sleep(max(0.0, until - time.monotonic()))
+            results = []
+            for k, s in enumerate(starts_):
+                found = Assignments(s.a_first.copy(), s.following.copy())
+                costs[id(found)] = costs[id(s)] - gains[len(starts)][k]
+                results.append(ReinsertResult(found, costs[id(found)], 1))
+            starts.append(starts_)
+            returned.append(results)
+            return results
+
+        monkeypatch.setattr(turns, "_reinsertion", fake)
+        found = take_turns(ctx, start, cost, time.monotonic() + 0.2, 0, config)
+        assert found.cost == min(line.cost for line in returned[-1])
+        return starts, returned
+
+    starts, returned = run(TurnsConfig(turn_s=0.05, chains=2))
+    assert len(starts) >= 4
+    own = [[line.best for line in lines] for lines in returned]
+    assert _same(starts[1], own[0])  # both found cheaper: their own
+    assert _same(starts[2], [own[1][1], own[1][1]])  # chain 0 stalled: the cheapest, chain 1's
+    assert _same(starts[3], [own[2][0], own[2][0]])  # chain 1 stalled: the cheapest, chain 0's
+    starts, returned = run(TurnsConfig(turn_s=0.05, chains=2, meet_stalled=False))
+    assert all(_same(starts[t], [line.best for line in returned[t - 1]]) for t in range(1, 4))
+
+
+def _same(xs: list[Assignments], ys: list[Assignments]) -> bool:
+    """The same answers (the very objects), in the same order."""
+    return len(xs) == len(ys) and all(x is y for x, y in zip(xs, ys, strict=True))
+
+
+def test_stalled_lineages_are_replaced_by_the_cheapest_the_others_kept() -> None:
+    """After a turn, each lineage that ended no cheaper than it began is the cheapest
+    lineage (the first of equals); the others are their own."""
+    a0, b0, c0 = (ReinsertResult(Assignments.single(*FLAGS), cost, 0) for cost in (5.0, 4.0, 3.0))
+    a1, b1, c1 = (ReinsertResult(Assignments.single(*FLAGS), cost, 0) for cost in (5.0, 2.0, 2.0))
+    assert turns._stalled_met([a0, b0, c0], [a1, b1, c1]) == [b1, b1, c1]
+    assert turns._stalled_met([a0, b0], [a1, b1])[0] is b1
+    assert turns._stalled_met([a0], [a1]) == [a1]
+    d1 = ReinsertResult(Assignments.single(*FLAGS), 6.0, 0)  # dearer than it began
+    assert turns._stalled_met([a0, b0], [d1, b1]) == [b1, b1]
+
+
 FLAGS = (np.zeros(1, dtype=bool), np.zeros(1, dtype=bool))  # a one-conflict answer
 
 
