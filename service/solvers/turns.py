@@ -9,9 +9,10 @@ lineage of its own: its next turn starts from its own best, and the turns answer
 cheapest lineage's best. Runs of one search end in basins far apart (docs/benchmarks.md,
 sessions 59 and 64), and lineages kept apart sample more of them than chains restarted
 from the cheapest of a turn (as from session 44 to 64: see TurnsConfig.chains). A
-lineage whose turn found nothing cheaper than its start has stalled in its basin: it
-goes on from the cheapest lineage's best, with its own seed (TurnsConfig.meet_stalled),
-so that no core keeps searching a basin that gave up. The cores are those the solve may
+lineage whose turn found nothing cheaper than its start has stalled in its basin, and one
+that ended the turn more than BEHIND dearer than the cheapest is unlikely to catch up: either
+goes on from the cheapest lineage's best, with its own seed (TurnsConfig.meet_stalled), so
+that no core keeps searching a basin that gave up or lags far. The cores are those the solve may
 take at that turn: its share of the machine among the solves under way
 (:func:`~service.core.threads.cores_per_solve`), so a lone request searches on every core
 whatever its ``workers``, and one that arrives while it searches gets its share from the
@@ -47,7 +48,7 @@ from service.core.threads import available_cores, cores_per_solve
 from service.solvers.registry import SolveContext
 from service.solvers.reinsert import ReinsertResult, reinsert_search
 
-__all__ = ["COOLED_SHARE", "MOST_COLD_S", "TurnsConfig", "TurnsResult", "take_turns"]
+__all__ = ["BEHIND", "COOLED_SHARE", "MOST_COLD_S", "TurnsConfig", "TurnsResult", "take_turns"]
 
 
 # Share of the time given to the turns over which re-insertion's annealing cools (its
@@ -73,6 +74,18 @@ COOLED_SHARE = 0.5
 # in the other. At 1 s (0.5 s cold, as before) cooling over 0.75 read 0.9776 / 0.9797
 # (12 / 17): mixed, so budgets up to 2.5 s keep half. See docs/benchmarks.md, "Session 59".
 MOST_COLD_S = 1.25
+# A lineage that ended a turn this share dearer than the cheapest goes on from the cheapest's
+# best (as one that stalled: see the module), however much its turn found. Measured (session
+# 65, ``python -m bench.ab --b service.solvers.turns.TurnsConfig.behind=0.03`` against stalled
+# lineages alone meeting, ``auto`` of one worker on two cores, two worlds, two seeds; cost
+# ratio, runs cheaper / dearer with it): wh_two_way, wh_two_lane, floor_dense of 100,
+# wh_two_way, wh_two_lane, wh_one_way, wh_mixed of 250 robots: 1 s 0.9527 / 0.9577 (16 / 11;
+# wh_two_way 250 0.896 / 0.927, 4 / 0), 5 s 0.9838 / 0.9862 (16 / 9; wh_two_lane 250 0.987 /
+# 0.973, 0 / 4); other worlds (``--seed 600000``: wh_two_way, wh_two_lane, wh_mixed of 100,
+# floor_dense of 50, wh_two_way, wh_one_way, wh_mixed of 250): 1 s 0.9808 / 0.9854 (16 / 11;
+# wh_one_way 250 0.954 / 0.973, 4 / 0), 5 s 0.9839 / 0.9838 (11 / 11). At 1 s a lagging
+# lineage has no time to catch up; at 5 s the meeting costs diversity as much as it gains.
+BEHIND = 0.03
 # Chain k > 0 of a turn (see TurnsConfig.chains) searches with the turn's seed plus k times
 # this: no two chains of the turns of one search share a seed.
 CHAIN_SEED_STRIDE = 1_000_003
@@ -130,6 +143,8 @@ class TurnsConfig:
     # 250) 1 s 0.9817 / 0.9826 (14 / 9), 5 s 0.9866 / 0.9895 (12 / 12; wh_mixed 250 0.986 /
     # 0.996, 4 / 0, floor_dense 50 0.996 / 0.986, 0 / 2).
     meet_stalled: bool = True
+    # ... and where it ended more than this share dearer than the cheapest (inf: stalled alone)
+    behind: float = BEHIND
 
 
 class TurnsResult(NamedTuple):
@@ -153,8 +168,8 @@ def take_turns(
     the solve may take at that turn, at least ``ctx.workers``: see TurnsConfig.chains),
     each turn of each from its own best answer so far with the turn's seed (lineage k's
     plus k times CHAIN_SEED_STRIDE), or from the cheapest lineage's where its last turn
-    found nothing cheaper (``config.meet_stalled``) -> the cheapest lineage's best (the
-    first of equals).
+    found nothing cheaper or ended more than ``config.behind`` dearer than the cheapest
+    (``config.meet_stalled``) -> the cheapest lineage's best (the first of equals).
     ``config`` None: TurnsConfig's defaults, read at the call (so that ``bench.ab`` can
     vary them)."""
     config = TurnsConfig() if config is None else config
@@ -172,7 +187,7 @@ def take_turns(
             starts = [line.best for line in began_from]
             lineages = _reinsertion(ctx, starts, until, seed + turns, cooling, pool)
             if config.meet_stalled:
-                lineages = _stalled_met(began_from, lineages)
+                lineages = _met(began_from, lineages, config.behind)
             turns += 1
     best = min(lineages, key=lambda line: line.cost)
     return TurnsResult(best.best, best.cost, turns)
@@ -189,15 +204,16 @@ def _as_many(lineages: list[ReinsertResult], n: int) -> list[ReinsertResult]:
     return lineages + [cheapest] * (n - len(lineages))
 
 
-def _stalled_met(
-    began_from: list[ReinsertResult], ended: list[ReinsertResult]
+def _met(
+    began_from: list[ReinsertResult], ended: list[ReinsertResult], behind: float
 ) -> list[ReinsertResult]:
     """The lineages after a turn that ``began_from`` those and ``ended`` with these (in
-    the same order): each that found nothing cheaper replaced by the cheapest (the first of
-    equals)."""
+    the same order): each that found nothing cheaper, or ended more than ``behind`` (a
+    share) dearer than the cheapest, replaced by the cheapest (the first of equals)."""
     cheapest = min(ended, key=lambda line: line.cost)
+    lagging = (1 + behind) * cheapest.cost
     return [
-        cheapest if end.cost >= began.cost else end
+        cheapest if end.cost >= began.cost or end.cost > lagging else end
         for began, end in zip(began_from, ended, strict=True)
     ]
 

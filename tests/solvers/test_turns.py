@@ -216,9 +216,9 @@ def test_a_solve_arriving_during_the_turns_takes_its_share_from_the_next_turn(
 def test_each_chain_goes_on_from_its_own_best_and_the_cheapest_lineage_is_the_answer(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    """Chains never meet: a chain's next turn starts from what its own last turn returned,
-    not from the cheapest of the turn; the turns answer the cheapest lineage's best (the
-    first of equals)."""
+    """With ``meet_stalled`` off, chains never meet: a chain's next turn starts from what
+    its own last turn returned, not from the cheapest of the turn; the turns answer the
+    cheapest lineage's best (the first of equals)."""
     ctx, start, cost = _wh50()
     starts: list[list[Assignments]] = []
     returned: list[list[ReinsertResult]] = []
@@ -237,7 +237,8 @@ def test_each_chain_goes_on_from_its_own_best_and_the_cheapest_lineage_is_the_an
         return results
 
     monkeypatch.setattr(turns, "_reinsertion", fake)
-    found = take_turns(ctx, start, cost, time.monotonic() + 0.25, 0, TurnsConfig(turn_s=0.05))
+    config = TurnsConfig(turn_s=0.05, meet_stalled=False)
+    found = take_turns(ctx, start, cost, time.monotonic() + 0.25, 0, config)
     assert len(starts) == found.turns >= 3
     chains = len(starts[0])
     assert all(first is start for first in starts[0])
@@ -254,8 +255,9 @@ def test_a_lineage_that_stalled_goes_on_from_the_cheapest_lineage(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     """A chain whose turn returned nothing cheaper than its start begins its next turn
-    from the cheapest lineage's best, the others from their own; with ``meet_stalled``
-    off, every chain from its own."""
+    from the cheapest lineage's best, the others from their own (none lagging: ``behind``
+    inf), and so does one that lags the cheapest by more than ``behind``; with
+    ``meet_stalled`` off, every chain from its own."""
     ctx, start, cost = _wh50()
     # what each chain's turn takes off its start's cost: chain 0 stalls on turn 1, chain 1
     # on turns 2, 3, ...
@@ -282,7 +284,7 @@ def test_a_lineage_that_stalled_goes_on_from_the_cheapest_lineage(
         assert found.cost == min(line.cost for line in returned[-1])
         return starts, returned
 
-    starts, returned = run(TurnsConfig(turn_s=0.05, chains=2))
+    starts, returned = run(TurnsConfig(turn_s=0.05, chains=2, behind=np.inf))
     assert len(starts) >= 4
     own = [[line.best for line in lines] for lines in returned]
     assert _same(starts[1], own[0])  # both found cheaper: their own
@@ -290,6 +292,9 @@ def test_a_lineage_that_stalled_goes_on_from_the_cheapest_lineage(
     assert _same(starts[3], [own[2][0], own[2][0]])  # chain 1 stalled: the cheapest, chain 0's
     starts, returned = run(TurnsConfig(turn_s=0.05, chains=2, meet_stalled=False))
     assert all(_same(starts[t], [line.best for line in returned[t - 1]]) for t in range(1, 4))
+    starts, returned = run(TurnsConfig(turn_s=0.05, chains=2, behind=0.01))
+    assert returned[0][0].cost > 1.01 * returned[0][1].cost  # chain 0 lags after turn 0
+    assert _same(starts[1], [returned[0][1].best] * 2)
 
 
 def _same(xs: list[Assignments], ys: list[Assignments]) -> bool:
@@ -297,16 +302,24 @@ def _same(xs: list[Assignments], ys: list[Assignments]) -> bool:
     return len(xs) == len(ys) and all(x is y for x, y in zip(xs, ys, strict=True))
 
 
-def test_stalled_lineages_are_replaced_by_the_cheapest_the_others_kept() -> None:
-    """After a turn, each lineage that ended no cheaper than it began is the cheapest
-    lineage (the first of equals); the others are their own."""
-    a0, b0, c0 = (ReinsertResult(Assignments.single(*FLAGS), cost, 0) for cost in (5.0, 4.0, 3.0))
-    a1, b1, c1 = (ReinsertResult(Assignments.single(*FLAGS), cost, 0) for cost in (5.0, 2.0, 2.0))
-    assert turns._stalled_met([a0, b0, c0], [a1, b1, c1]) == [b1, b1, c1]
-    assert turns._stalled_met([a0, b0], [a1, b1])[0] is b1
-    assert turns._stalled_met([a0], [a1]) == [a1]
-    d1 = ReinsertResult(Assignments.single(*FLAGS), 6.0, 0)  # dearer than it began
-    assert turns._stalled_met([a0, b0], [d1, b1]) == [b1, b1]
+def test_stalled_and_lagging_lineages_are_replaced_by_the_cheapest_the_others_kept() -> None:
+    """After a turn, each lineage that ended no cheaper than it began, or more than
+    ``behind`` dearer than the cheapest, is the cheapest lineage (the first of equals);
+    the others are their own."""
+
+    def line(cost: float) -> ReinsertResult:
+        return ReinsertResult(Assignments.single(*FLAGS), cost, 0)
+
+    a0, b0, c0 = line(5.0), line(4.0), line(3.0)
+    a1, b1, c1 = line(5.0), line(2.0), line(2.0)
+    assert turns._met([a0, b0, c0], [a1, b1, c1], np.inf) == [b1, b1, c1]
+    assert turns._met([a0, b0], [a1, b1], np.inf)[0] is b1
+    assert turns._met([a0], [a1], np.inf) == [a1]
+    a2, b2 = line(4.1), line(4.0)  # a improved, lagging by 2.5 %
+    assert turns._met([a0, b0], [a2, b2], 0.03) == [a2, b2]  # b stalled, the cheapest
+    assert turns._met([a0, c0], [a2, c1], 0.03) == [c1, c1]  # a lags by 105 %
+    assert turns._met([a0, c0], [line(2.06), c1], 0.03)[0].cost == 2.06  # by 3 %: kept
+    assert turns._met([a0, c0], [line(2.061), c1], 0.03)[0] is c1  # just past
 
 
 FLAGS = (np.zeros(1, dtype=bool), np.zeros(1, dtype=bool))  # a one-conflict answer
