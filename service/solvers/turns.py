@@ -10,10 +10,11 @@ cheapest lineage's best. Runs of one search end in basins far apart (docs/benchm
 sessions 59 and 64), and lineages kept apart sample more of them than chains restarted
 from the cheapest of a turn (as from session 44 to 64: see TurnsConfig.chains). A
 lineage whose turn found nothing cheaper than its start has stalled in its basin, and one
-that ended the turn more than BEHIND dearer than the cheapest is unlikely to catch up: either
-goes on from the cheapest lineage's best, with its own seed (TurnsConfig.meet_stalled), so
-that no core keeps searching a basin that gave up or lags far. The cores are those the solve may
-take at that turn: its share of the machine among the solves under way
+that ended the turn more than BEHIND dearer than the cheapest is unlikely to catch up:
+either goes on from the cheapest lineage's best, with its own seed
+(TurnsConfig.meet_stalled), so that no core keeps searching a basin that gave up or lags
+far. The cores are those the solve may take at that turn: its share of the machine among
+the solves under way
 (:func:`~service.core.threads.cores_per_solve`), so a lone request searches on every core
 whatever its ``workers``, and one that arrives while it searches gets its share from the
 next turn on (the dearest lineages stop; where cores free up, new lineages start from the
@@ -121,15 +122,16 @@ class TurnsConfig:
     # 0.858), 5 s 0.9755 / 0.9776 (14 / 15; wh_two_lane 250 0.975 / 0.988, but wh_two_way 100 0.986
     # / 0.959, dearer in 6 of 6: at 100 robots each of two chains takes 0.70-0.83 of one chain's
     # steps, at 250 no fewer). Since session 64 the chains are lineages that never meet (see the
-    # module; since session 65, unless one stalls: meet_stalled). Measured (``python -m bench.ab --b
-    # service.solvers.turns.TurnsConfig.independent=True``, an ad hoc flag: each chain its own turns
-    # to the deadline, the cheapest answer kept; against the cheapest chain of each turn going on in
-    # both, two chains on one worker's ``auto``; the kinds above, three worlds, two seeds): 1 s
-    # 0.9302 / 0.9333 (9 cheaper, 21 dearer of 30 merged; wh_two_lane 250 0.904 / 0.918), 5 s 0.9770
-    # / 0.9829 (13 / 16; wh_two_way 100 0.977 / 0.988); other worlds (``--seed 600000``, wh_two_way,
-    # wh_two_lane, floor_dense, wh_mixed of 100, wh_two_way, wh_one_way, wh_mixed of 250, two
-    # worlds, two seeds) 1 s 0.9801 / 0.9823 (11 / 17), 5 s 0.9889 / 0.9875 (14 / 12; wh_one_way 250
-    # 0.987 / 0.978, dearer in 4 of 4, wh_mixed 250 0.984 / 0.973, the 100-robot kinds better).
+    # module; since session 65, unless one stalls or lags: meet_stalled). Measured (``python -m
+    # bench.ab --b service.solvers.turns.TurnsConfig.independent=True``, an ad hoc flag: each chain
+    # its own turns to the deadline, the cheapest answer kept; against the cheapest chain of each
+    # turn going on in both, two chains on one worker's ``auto``; the kinds above, three worlds, two
+    # seeds): 1 s 0.9302 / 0.9333 (9 cheaper, 21 dearer of 30 merged; wh_two_lane 250 0.904 /
+    # 0.918), 5 s 0.9770 / 0.9829 (13 / 16; wh_two_way 100 0.977 / 0.988); other worlds (``--seed
+    # 600000``, wh_two_way, wh_two_lane, floor_dense, wh_mixed of 100, wh_two_way, wh_one_way,
+    # wh_mixed of 250, two worlds, two seeds) 1 s 0.9801 / 0.9823 (11 / 17), 5 s 0.9889 / 0.9875 (14
+    # / 12; wh_one_way 250 0.987 / 0.978, dearer in 4 of 4, wh_mixed 250 0.984 / 0.973, the
+    # 100-robot kinds better).
     chains: int | None = None
     # Whether a lineage whose turn found nothing cheaper than its start goes on from the
     # cheapest lineage's best (see the module). Measured (session 65, ``python -m bench.ab
