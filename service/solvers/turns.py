@@ -75,18 +75,20 @@ COOLED_SHARE = 0.5
 # in the other. At 1 s (0.5 s cold, as before) cooling over 0.75 read 0.9776 / 0.9797
 # (12 / 17): mixed, so budgets up to 2.5 s keep half. See docs/benchmarks.md, "Session 59".
 MOST_COLD_S = 1.25
-# A lineage that ended a turn this share dearer than the cheapest goes on from the cheapest's
-# best (as one that stalled: see the module), however much its turn found. Measured (session
-# 65, ``python -m bench.ab --b service.solvers.turns.TurnsConfig.behind=0.03`` against stalled
-# lineages alone meeting, ``auto`` of one worker on two cores, two worlds, two seeds; cost
-# ratio, runs cheaper / dearer with it): wh_two_way, wh_two_lane, floor_dense of 100,
-# wh_two_way, wh_two_lane, wh_one_way, wh_mixed of 250 robots: 1 s 0.9527 / 0.9577 (16 / 11;
-# wh_two_way 250 0.896 / 0.927, 4 / 0), 5 s 0.9838 / 0.9862 (16 / 9; wh_two_lane 250 0.987 /
-# 0.973, 0 / 4); other worlds (``--seed 600000``: wh_two_way, wh_two_lane, wh_mixed of 100,
-# floor_dense of 50, wh_two_way, wh_one_way, wh_mixed of 250): 1 s 0.9808 / 0.9854 (16 / 11;
-# wh_one_way 250 0.954 / 0.973, 4 / 0), 5 s 0.9839 / 0.9838 (11 / 11). At 1 s a lagging
-# lineage has no time to catch up; at 5 s the meeting costs diversity as much as it gains.
-BEHIND = 0.03
+# A lineage that ended a turn this share dearer than the cheapest goes on from the cheapest's best
+# (as one that stalled: see the module), however much its turn found. Measured (session 65, ``python
+# -m bench.ab``, ``auto`` of one worker on two cores, two worlds a kind, two seeds; cost ratio, runs
+# cheaper / dearer with B) on set one (wh_two_way, wh_two_lane, floor_dense of 100, wh_two_way,
+# wh_two_lane, wh_one_way, wh_mixed of 250 robots) and set two (``--seed 600000``: wh_two_way,
+# wh_two_lane, wh_mixed of 100, floor_dense of 50, wh_two_way, wh_one_way, wh_mixed of 250). 0.03
+# (B, ``--b service.solvers.turns.TurnsConfig.behind=0.03``) against stalled lineages alone meeting:
+# set one 1 s 0.9527 / 0.9577 (16 / 11; wh_two_way 250 0.896 / 0.927, 4 / 0), 5 s 0.9838 / 0.9862
+# (16 / 9; wh_two_lane 250 0.987 / 0.973, 0 / 4); set two 1 s 0.9808 / 0.9854 (16 / 11; wh_one_way
+# 250 0.954 / 0.973, 4 / 0), 5 s 0.9839 / 0.9838 (11 / 11). At 1 s a lagging lineage has no time to
+# catch up; at 5 s the meeting costs diversity about as much as it gains. 0.015 (B) against 0.03:
+# set one 1 s 0.9570 / 0.9557 (15 / 12), 5 s 0.9827 / 0.9850 (11 / 11); set two 1 s 0.9889 / 0.9915
+# (16 / 7), 5 s 0.9860 / 0.9893 (11 / 10).
+BEHIND = 0.015
 # Chain k > 0 of a turn (see TurnsConfig.chains) searches with the turn's seed plus k times
 # this: no two chains of the turns of one search share a seed.
 CHAIN_SEED_STRIDE = 1_000_003
