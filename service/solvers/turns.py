@@ -193,7 +193,7 @@ def take_turns(
             if config.meet_stalled:
                 lineages = _met(began_from, lineages, config.behind)
             turns += 1
-    best = min(lineages, key=lambda line: line.cost)
+    best = _cheapest(lineages)
     return TurnsResult(best.best, best.cost, turns)
 
 
@@ -204,8 +204,13 @@ def _as_many(lineages: list[ReinsertResult], n: int) -> list[ReinsertResult]:
     if len(lineages) > n:
         kept = sorted(range(len(lineages)), key=lambda k: lineages[k].cost)[:n]
         return [lineages[k] for k in sorted(kept)]
-    cheapest = min(lineages, key=lambda line: line.cost)
+    cheapest = _cheapest(lineages)
     return lineages + [cheapest] * (n - len(lineages))
+
+
+def _cheapest(lineages: list[ReinsertResult]) -> ReinsertResult:
+    """The cheapest of ``lineages`` (the first of equals)."""
+    return min(lineages, key=lambda line: line.cost)
 
 
 def _met(
@@ -214,7 +219,7 @@ def _met(
     """The lineages after a turn that ``began_from`` those and ``ended`` with these (in
     the same order): each that found nothing cheaper, or ended more than ``behind`` (a
     share) dearer than the cheapest, replaced by the cheapest (the first of equals)."""
-    cheapest = min(ended, key=lambda line: line.cost)
+    cheapest = _cheapest(ended)
     lagging = (1 + behind) * cheapest.cost
     return [
         cheapest if end.cost >= began.cost or end.cost > lagging else end

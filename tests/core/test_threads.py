@@ -116,6 +116,8 @@ def test_the_cores_available_are_the_affinity_capped_by_the_cgroup_quota(
     tmp_path,
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
+    """The affinity's cores, capped by a cgroup v2 or v1 CPU quota rounded up where one is
+    set and readable (``cores`` None: the affinity alone)."""
     affinity = len(os.sched_getaffinity(0))
     v2_file = tmp_path / "cpu.max"
     quota_file, period_file = tmp_path / "cfs_quota_us", tmp_path / "cfs_period_us"
