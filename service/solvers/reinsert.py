@@ -333,6 +333,7 @@ class _Static(NamedTuple):
     rc_partner_node: np.ndarray  # (2M,) the partner's node
     rc_force: np.ndarray  # (2M,) int, +1 the robot must pass first, -1 second, 0 free
     rc_may_follow: np.ndarray  # (2M,) bool, following-type allowed at all
+    rc_roomy: np.ndarray  # (2M,) bool, allowed and in no binding clique: it needs no room
     own_live: np.ndarray  # (2M,) bool
     own_target: np.ndarray  # (2M,) the robot's pair-enter event
     own_source: np.ndarray  # (2, 2M) by type, the partner's event it waits on
@@ -386,6 +387,7 @@ class _Static(NamedTuple):
             conf_nodes[conf, 1 - side],
             np.where(forced == 0, 0, np.where((forced > 0) == (side == 0), 1, -1)),
             may_follow[conf],
+            may_follow[conf] & (np.diff(cq_start) == 0)[conf],
             graph.live[own],
             graph.target[own].astype(np.int64),
             np.ascontiguousarray(graph.source[:, own], dtype=np.int64),
@@ -714,12 +716,7 @@ def _repair(
         chosen = np.empty(k, dtype=np.bool_)
         ev_node = st.ev_node[e0:e1]
         own = weight[e0:e1].sum()
-        follow = np.zeros(k, dtype=np.bool_)
-        for first_pass in (True, False):  # room for the preferred conflicts first
-            for i in range(k):
-                c = st.rc_conf[js[i]]
-                if st.rc_may_follow[js[i]] and preferred[c] == first_pass:
-                    follow[i] = _take_room(st, c, room)
+        follow = _room_for(st, js, preferred, room)
         passing = _Passing(
             js, kidx, ranks.size, e0, ev_node, n_nodes, latest, price, own, bound_node,
             bound_force, reach.size > 0,
@@ -744,6 +741,23 @@ def _repair(
         if cost >= cap:
             return np.inf, -1
     return cost, -1
+
+
+@numba.njit(cache=True, nogil=True)
+def _room_for(st: _Static, js: np.ndarray, preferred: np.ndarray, room: np.ndarray) -> np.ndarray:
+    """(K,) bool: following-type allowed on the robot's slots ``js`` (K,) and room for it
+    taken (``room`` (Q,)), the ``preferred`` (M,) conflicts' first (see :func:`_repair`).
+    Conflicts in no binding clique need none (on the generated warehouses, every one:
+    taking room for each, in two passes over the robot's ~175 conflicts, made a step of 40
+    robots at 250 robots 1.46 ms instead of 1.36, session 66)."""
+    follow = st.rc_roomy[js]
+    bound = np.flatnonzero(st.rc_may_follow[js] & ~follow)  # conflicts that take room
+    for first_pass in (True, False):  # room for the preferred conflicts first
+        for i in bound:
+            c = st.rc_conf[js[i]]
+            if preferred[c] == first_pass:
+                follow[i] = _take_room(st, c, room)
+    return follow
 
 
 class _Passing(NamedTuple):

@@ -260,14 +260,16 @@ def _events_of(ctx: SolveContext, robots: np.ndarray) -> np.ndarray:
     seed=st.integers(0, 10_000),
     robots=st.integers(3, 30),
     price=st.sampled_from([np.inf, 0.3, 3.0]),
+    rounds=st.sampled_from([0, reinsert.ROOM_ROUNDS]),
 )
 def test_a_lone_robot_never_finishes_later_than_it_did(
-    family: str, seed: int, robots: int, price: float
+    family: str, seed: int, robots: int, price: float, rounds: int
 ) -> None:
     """Put back alone, with every other robot held, a robot's passage is exact for it: its
     last delay (plus the price of the held robots it pushes past their latest, where it
     may) is at most the one it had (whose passage is among those searched: its
-    following-type conflicts get the room they had first, binding budgets too)."""
+    following-type conflicts get the room they had first, binding budgets too), with
+    passages where room was short (``rounds``) or without."""
     ctx = _context(_request(family, seed, robots), "avg_completion")
     problem = ctx.problem
     if problem.n_conflicts == 0:
@@ -275,7 +277,7 @@ def test_a_lone_robot_never_finishes_later_than_it_did(
     current = _incumbent(ctx)
     weight = ctx.evaluator.objective_weights(ctx.objective)
     for robot in range(problem.n_robots):
-        cost, _ = _alone(ctx, current, robot, price, reinsert.ROOM_ROUNDS, True)
+        cost, _ = _alone(ctx, current, robot, price, rounds, True)
         mine = _events_of(ctx, np.array([robot]))
         assert cost <= float(weight[mine] @ current.delay[mine]) + 1e-9
 
