@@ -692,3 +692,29 @@ def test_an_empty_batch_has_empty_results() -> None:
     result = Evaluator(problem).evaluate(Assignments(empty, empty))
     assert result.completion.shape == (0, problem.n_robots)
     assert all(result.costs[k].shape == (0,) for k in OBJECTIVES)
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(
+    rows=st.lists(
+        st.lists(st.floats(0.0, 1e5, allow_nan=False), min_size=1, max_size=12),
+        min_size=1,
+        max_size=5,
+    ).filter(lambda rows: len({len(row) for row in rows}) == 1)
+)
+def test_completion_costs_are_the_mean_the_max_and_the_mean_plus_spread(
+    rows: list[list[float]],
+) -> None:
+    """avg, max and sync completion of every row of a batch (one robot too) are its mean,
+    its max and its mean plus its mean absolute deviation, and each row's are bit for
+    bit those of the row alone."""
+    completion = np.array(rows)  # (S, R)
+    got = evaluate.costs_from_completion(completion)
+    mean = completion.mean(axis=1)
+    spread = np.abs(completion - mean[:, None]).mean(axis=1)
+    np.testing.assert_allclose(got["avg_completion"], mean, rtol=1e-12, atol=1e-9)
+    np.testing.assert_array_equal(got["max_completion"], completion.max(axis=1))
+    np.testing.assert_allclose(got["sync_completion"], mean + spread, rtol=1e-12, atol=1e-9)
+    for s, row in enumerate(completion):
+        alone = evaluate.costs_from_completion(row[None, :])
+        assert all(alone[k][0] == got[k][s] for k in got)
