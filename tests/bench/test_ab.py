@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
 
 import bench.ab as ab
-from bench.ab import Config, Setting, applied, parse_setting, table
+from bench.ab import Config, Setting, applied, paired_interval, parse_setting, table
 from service.solvers import portfolio, turns
 from service.solvers.turns import TurnsConfig
 
@@ -64,8 +66,36 @@ def test_the_table_counts_wins_and_measures_against_the_best_at_the_end() -> Non
     (w,) = [line for line in lines if line.startswith("| w |")]
     # w/0: best 10 (A's run): A 1.0, B 0.5; delay (10 - 5) / (cost - 5): 1.0, 0.333. w/1:
     # best 12: A 0.4, B 0.5; delay 0.28, 0.368.
-    assert w == "| w | 2 | 0.7000 / 0.640 | 0.5000 / 0.351 | 1 / 1 | 1 / 0 |"
+    # B - A: w/0 0.5 - 1.0, w/1 0.5 - 0.4: mean -0.2; two worlds bound no interval.
+    assert w == "| w | 2 | 0.7000 / 0.640 | 0.5000 / 0.351 | -0.2000 | 1 / 1 | 1 / 0 |"
     assert any(line.startswith("| all | 2 |") for line in lines)
+
+
+def test_the_table_bounds_b_minus_a_where_it_has_enough_worlds() -> None:
+    # Six worlds, B cheaper by 10 % of the best on each, whose cost A sets: each gain
+    # 10 / 9 - 1 (B at the best, A at 10 / 9 of it), so every resample reads the same.
+    rows = [row for k in range(6) for row in (_row(f"w/{k}", 0, "A", 10.0),
+                                              _row(f"w/{k}", 0, "B", 9.0))]  # fmt: skip
+    (w,) = [line for line in table(rows).splitlines() if line.startswith("| w |")]
+    assert "| -0.1000 (-0.1000, -0.1000) | 6 / 0 |" not in w  # A is the dearer one here
+    assert "| +0.1000 (+0.1000, +0.1000) | 0 / 6 |" in w
+
+
+def test_the_interval_resamples_worlds_and_holds_the_mean() -> None:
+    assert all(math.isnan(x) for x in paired_interval([[0.1], [0.2], [], [0.3], [0.4]]))
+    one_world_many_seeds = [[0.05] * 20] + [[0.0]] * 4  # five worlds, one run each but one
+    low, high = paired_interval(one_world_many_seeds)
+    # Worlds resampled, the many-seeded world is left out of a third of the resamples (4/5
+    # to the fifth): the interval reaches 0. Runs resampled as if each were a world of its
+    # own read 20 of 24 runs at 0.05 nearly every time: a narrow interval around 0.042.
+    assert low == 0.0 and 0.045 < high < 0.05
+    runs_low, runs_high = paired_interval([[g] for world in one_world_many_seeds for g in world])
+    assert 0.03 < runs_low < runs_high < 0.05
+    gains = [[0.01, -0.02], [0.03], [-0.01, 0.0], [0.02], [0.0, 0.01, 0.04]]
+    low, high = paired_interval(gains)
+    every = [g for world in gains for g in world]
+    assert low < sum(every) / len(every) < high
+    assert paired_interval(gains) == (low, high)  # a fixed resampling seed
 
 
 def test_variants_run_back_to_back_their_order_alternating(monkeypatch, tmp_path) -> None:
