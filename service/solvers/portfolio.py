@@ -79,7 +79,7 @@ from service.solvers.exact import build_seconds, improve, milp_staged
 from service.solvers.lns import LNS_OBJECTIVES, lns_search
 from service.solvers.lns import MAX_ROBOTS as LNS_MAX_ROBOTS
 from service.solvers.registry import SolveContext, SolverOutput, get_solver, register
-from service.solvers.reinsert import REINSERT_OBJECTIVES, planned_start
+from service.solvers.reinsert import REINSERT_OBJECTIVES, planned_starts
 from service.solvers.tabu import plain_start, tabu_search
 from service.solvers.turns import take_turns
 
@@ -264,7 +264,7 @@ MID_LNS_LEAST_S = {"avg_completion": math.inf, "avg_delay": 4.0}
 MID_TURNS_SHARE = 0.1
 MID_TURNS_MIN_CONFLICTS = 200
 # From ``lns_min_conflicts`` conflicts the first stage is the cheapest of PLANNED_ORDERS
-# prioritized plans of the whole fleet (:func:`~service.solvers.reinsert.planned_start`,
+# prioritized plans of the whole fleet (:func:`~service.solvers.reinsert.planned_starts`,
 # ~1-2 ms a plan at 100 robots, 8-18 ms at 250), not priority search from the blend with
 # 15 % of the budget (session 25's REINSERT_FIRST_SHARE, measured then against 5 % and
 # 30 %). Measured (session 26, through the dispatcher, the 12 generated warehouses of 100
@@ -273,7 +273,9 @@ MID_TURNS_MIN_CONFLICTS = 200
 # 8 plans 0.8098 / 0.9284, 16 plans 0.8024 / 0.9170. The instant answer is sought only
 # where no plan is found (fixed directions against every order tried): on 34 generated
 # warehouses of 40-160 robots and 700-10,000 conflicts (both objectives; session 28) the
-# cheapest plan cost 0.27-0.77 of it, and it costs ~25-55 ms from 5,000 conflicts.
+# cheapest plan cost 0.27-0.77 of it, and it costs ~25-55 ms from 5,000 conflicts. Since
+# session 67 the other plans start re-insertion lineages of their own (as many as the turns
+# run: see :mod:`service.solvers.turns`).
 PLANNED_ORDERS = 4
 PLANNED_SHARE = 0.1  # of the budget, after which no further plan starts (one at least)
 # For these objectives (above ``exact_max_conflicts``) the first stage takes
@@ -381,12 +383,13 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
         and ctx.warm is None
     )
     # A re-schedule starts from its previous answer (tabu search, below), not from plans.
-    plans, planned = (reinserts or mid_turns) and ctx.warm is None, None
+    plans = (reinserts or mid_turns) and ctx.warm is None
+    planned: list[tuple[Assignments, float]] = []  # cheapest first
     if plans:
         until = time.monotonic() + PLANNED_SHARE * (deadline - time.monotonic())
-        planned = planned_start(ctx, PLANNED_ORDERS, ctx.seed, until)
-    if planned is not None:  # the instant answer is not sought (see PLANNED_ORDERS)
-        best, cost, stages = SolverOutput(planned[0]), planned[1], ["planned"]
+        planned = planned_starts(ctx, PLANNED_ORDERS, ctx.seed, until)
+    if planned:  # the instant answer is not sought (see PLANNED_ORDERS)
+        best, cost, stages = SolverOutput(planned[0][0]), planned[0][1], ["planned"]
     else:
         best, stages = SolverOutput(plain_start(ctx)), ["start"]
         cost = ctx.cost(best.assignment)
@@ -414,7 +417,8 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
         left = deadline - time.monotonic()
         share = MID_TURNS_SHARE if mid_turns else REINSERT_SHARE
         until = time.monotonic() + share * left if uses_lns else deadline
-        turned = take_turns(ctx, best.assignment, cost, until, ctx.seed)
+        # The other plans start lineages of their own (see take_turns' ``others``).
+        turned = take_turns(ctx, best.assignment, cost, until, ctx.seed, others=planned[1:])
         if turned.cost < cost:
             best, cost = replace(best, assignment=turned.best), turned.cost
             stages.append(f"re-insertion x{turned.turns} turns")

@@ -76,7 +76,7 @@ threads (merged where their robots were disjoint) gained nothing once the first 
 steps had both improved. See ANNEAL for what annealing gained. While hot, a step tries
 one order (HOT_ORDERS): more steps of rougher repairs, which the annealing tolerates.
 
-**A plan** (:func:`planned_start`) is the same repair of the whole fleet from no robot
+**A plan** (:func:`planned_starts`) is the same repair of the whole fleet from no robot
 placed: prioritized planning in one order, each robot on its exact passage past those
 before it; ``auto`` starts its large problems from the cheapest of a few. Where fixed
 directions between robots close cycles (robots parked in others' ways), each placement is
@@ -109,7 +109,7 @@ __all__ = [
     "ReinsertConfig",
     "ReinsertResult",
     "cheapest_plan",
-    "planned_start",
+    "planned_starts",
     "reinsert_search",
 ]
 
@@ -1071,18 +1071,20 @@ def _tolerated(temperature: float, rng: np.random.Generator) -> float:
     return float(rng.exponential(temperature)) if temperature > 0 else 0.0
 
 
-def planned_start(
+def planned_starts(
     ctx: SolveContext, orders: int, seed: int, until: float
-) -> tuple[Assignments, float] | None:
-    """The cheapest of up to ``orders`` prioritized plans of the whole fleet -> (answer,
-    cost), or None where fixed directions left every plan tried without a passage for
-    some robot. Plans are made until ``until`` (monotonic), one at least.
+) -> list[tuple[Assignments, float]]:
+    """Up to ``orders`` prioritized plans of the whole fleet -> (answer, cost) each, the
+    cheapest first (none where fixed directions left every plan tried without a passage
+    for some robot). Plans are made until ``until`` (monotonic), one at least.
 
     A plan puts every robot back, from none placed, in one order (:func:`_plan`): the
     shortest free route first (the rule that minimises a single machine's summed
     completion), the earliest free finish first, then random orders (``seed``). A plan
     costs ~1-2 ms at 100 robots and ~8-18 ms at 250; on generated warehouses one reads
-    0.44-0.80 of the best known where the cheapest blend of FCFS reads 0.23-0.43."""
+    0.44-0.80 of the best known where the cheapest blend of FCFS reads 0.23-0.43. ``auto``
+    starts a search from each of the cheapest (:mod:`service.solvers.turns`: what a plan
+    costs says little of where a search from it ends)."""
     p = ctx.problem
     free_end = p.free_time()  # (R,)
     free_start = np.full(p.n_robots, np.inf)  # (R,) each robot's first time point
@@ -1090,7 +1092,7 @@ def planned_start(
     rng = np.random.default_rng(seed)
     rules = [np.argsort(free_end - free_start, kind="stable"), np.argsort(free_end, kind="stable")]
     ordered = rules[:orders] + [rng.permutation(p.n_robots) for _ in range(orders - 2)]
-    return cheapest_plan(ctx, ordered, until, least=1)
+    return _plans(ctx, ordered, until, least=1)
 
 
 def cheapest_plan(
@@ -1100,23 +1102,29 @@ def cheapest_plan(
     (each (R,), robots in the order they are placed) tried until ``until`` (monotonic),
     ``least`` of them whatever the time -> (answer, cost), or None where none was made or
     fixed directions left each plan tried without a passage for some robot."""
+    found = _plans(ctx, orders, until, least)
+    return found[0] if found else None
+
+
+def _plans(
+    ctx: SolveContext, orders: list[np.ndarray], until: float, least: int
+) -> list[tuple[Assignments, float]]:
+    """The prioritized plans of the whole fleet in ``orders`` (as :func:`cheapest_plan`)
+    -> (answer, cost) each, the cheapest first (equals in the order tried)."""
     if not orders or (least < 1 and time.monotonic() >= until):
-        return None
+        return []
     every = np.arange(ctx.problem.n_robots)
     fixed = _fixed_between(_Static.of(ctx), every, True)
     reach = _plan_reach(ctx, fixed)
     weight = ctx.evaluator.objective_weights(ctx.objective)
-    found = None
+    found: list[tuple[Assignments, float]] = []
     for k, order in enumerate(orders):
         if k >= least and time.monotonic() >= until:
             break
         plan = _plan(ctx, order, fixed, weight, reach)
-        if plan is None:
-            continue
-        cost = float(ctx.evaluator.evaluate(plan).costs[ctx.objective][0])
-        if found is None or cost < found[1]:
-            found = (plan, cost)
-    return found
+        if plan is not None:
+            found.append((plan, float(ctx.evaluator.evaluate(plan).costs[ctx.objective][0])))
+    return sorted(found, key=lambda made: made[1])
 
 
 def _plan(

@@ -235,9 +235,9 @@ def test_from_lns_min_conflicts_re_insertion_follows_the_first_stage(
     untils: list[float] = []
     original = portfolio.take_turns
 
-    def recorded(ctx: Any, start: Any, cost: float, until: float, seed: int) -> Any:
+    def recorded(ctx: Any, start: Any, cost: float, until: float, seed: int, **kw: Any) -> Any:
         untils.append(until)
-        return original(ctx, start, cost, until, seed)
+        return original(ctx, start, cost, until, seed, **kw)
 
     monkeypatch.setattr(portfolio, "take_turns", recorded)
     if least_s is not None:
@@ -287,9 +287,9 @@ def test_below_lns_min_conflicts_the_first_stage_is_the_turns(
     untils: list[float] = []
     original = portfolio.take_turns
 
-    def recorded(ctx: Any, start: Any, cost: float, until: float, seed: int) -> Any:
+    def recorded(ctx: Any, start: Any, cost: float, until: float, seed: int, **kw: Any) -> Any:
         untils.append(until)
-        return original(ctx, start, cost, until, seed)
+        return original(ctx, start, cost, until, seed, **kw)
 
     searched: list[bool] = []
     lns_search = portfolio.lns_search
@@ -367,7 +367,7 @@ def test_a_re_schedule_starts_from_the_previous_answer_not_a_plan(
     def no_plan(*args: object, **kwargs: object) -> object:
         raise AssertionError("a warm re-schedule made a plan")
 
-    monkeypatch.setattr(portfolio, "planned_start", no_plan)
+    monkeypatch.setattr(portfolio, "planned_starts", no_plan)
     line = json.loads((DATA / "wh_25.jsonl").read_text().splitlines()[0])
     problem = problem_from_request(ScheduleRequest.model_validate(line["request"]))
     cold = SolveContext(problem, "avg_completion", 0.3)
@@ -386,6 +386,37 @@ def test_a_re_schedule_starts_from_the_previous_answer_not_a_plan(
     assert checks.acyclic[0] and checks.density[0]
 
 
+def test_the_other_plans_start_lineages_of_their_own(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``auto`` starts its turns from the cheapest plan and hands them the other plans
+    (cheaper first), each the start of a lineage of its own (``take_turns``' ``others``),
+    in each component it solves apart."""
+    import service.solvers.portfolio as portfolio
+    from service.solvers.registry import get_solver
+
+    made: list[list[tuple[Assignments, float]]] = []
+    given: list[tuple[Assignments, list[tuple[Assignments, float]]]] = []
+    planned_starts, take_turns = portfolio.planned_starts, portfolio.take_turns
+
+    def planned(*args: Any) -> list[tuple[Assignments, float]]:
+        made.append(planned_starts(*args))
+        return made[-1]
+
+    def turned(ctx: Any, start: Any, cost: float, until: float, seed: int, **kw: Any) -> Any:
+        given.append((start, kw["others"]))
+        return take_turns(ctx, start, cost, until, seed, **kw)
+
+    monkeypatch.setattr(portfolio, "planned_starts", planned)
+    monkeypatch.setattr(portfolio, "take_turns", turned)
+    line = json.loads((DATA / "wh_50.jsonl").read_text().splitlines()[0])
+    problem = problem_from_request(ScheduleRequest.model_validate(line["request"]))
+    ctx = SolveContext(problem, "avg_completion", 0.3, exact_max_conflicts=0, lns_min_conflicts=0)
+    assert get_solver("auto")(ctx) is not None
+    assert len(made) == len(given) >= 1
+    assert max(len(plans) for plans in made) == portfolio.PLANNED_ORDERS  # as time allows
+    for plans, (start, others) in zip(made, given, strict=True):
+        assert start is plans[0][0] and others == plans[1:]
+
+
 @pytest.mark.parametrize("plan_found", [True, False])
 def test_plans_replace_the_instant_answer_where_one_is_found(
     monkeypatch: pytest.MonkeyPatch, plan_found: bool
@@ -398,17 +429,17 @@ def test_plans_replace_the_instant_answer_where_one_is_found(
     from service.solvers.registry import get_solver
 
     sought: list[bool] = []
-    plain_start, planned_start = portfolio.plain_start, portfolio.planned_start
+    plain_start, planned_starts = portfolio.plain_start, portfolio.planned_starts
 
     def watched(ctx: SolveContext) -> Assignments:
         sought.append(True)
         return plain_start(ctx)
 
-    def planned(*args: Any, **kwargs: Any) -> tuple[Assignments, float] | None:
-        return planned_start(*args, **kwargs) if plan_found else None
+    def planned(*args: Any, **kwargs: Any) -> list[tuple[Assignments, float]]:
+        return planned_starts(*args, **kwargs) if plan_found else []
 
     monkeypatch.setattr(portfolio, "plain_start", watched)
-    monkeypatch.setattr(portfolio, "planned_start", planned)
+    monkeypatch.setattr(portfolio, "planned_starts", planned)
     line = json.loads((DATA / "wh_50.jsonl").read_text().splitlines()[0])
     problem = problem_from_request(ScheduleRequest.model_validate(line["request"]))
     ctx = SolveContext(problem, "avg_completion", 0.3, exact_max_conflicts=0, lns_min_conflicts=0)

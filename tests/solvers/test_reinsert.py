@@ -665,14 +665,13 @@ def test_a_plan_of_the_whole_fleet_is_valid_and_its_first_robot_never_waits(
     completion = ctx.evaluator.evaluate(plan).completion[0]
     if reach.size == 0:  # else a robot fixed to pass it first may push it
         assert completion[first] == pytest.approx(problem.free_time()[first])
-    found = reinsert.planned_start(ctx, 4, seed, np.inf)
-    assert found is not None or problem.has_forced
-    if found is None:
-        return
-    best, cost = found
-    assert cost == float(ctx.evaluator.evaluate(best).costs[objective][0])
-    checks = check(problem, ctx.cliques, best)
-    assert checks.acyclic[0] and checks.density[0] and checks.forced[0]
+    found = reinsert.planned_starts(ctx, 4, seed, np.inf)
+    assert found or problem.has_forced
+    assert [cost for _, cost in found] == sorted(cost for _, cost in found)  # cheapest first
+    for best, cost in found:
+        assert cost == float(ctx.evaluator.evaluate(best).costs[objective][0])
+        checks = check(problem, ctx.cliques, best)
+        assert checks.acyclic[0] and checks.density[0] and checks.forced[0]
 
 
 def test_a_plan_is_found_where_fixed_directions_between_robots_close_cycles() -> None:
@@ -703,8 +702,7 @@ def test_a_plan_is_found_where_fixed_directions_between_robots_close_cycles() ->
         assert plan is not None
         checks = check(problem, ctx.cliques, plan)
         assert checks.acyclic[0] and checks.density[0] and checks.forced[0]
-    found = reinsert.planned_start(ctx, 4, 0, np.inf)
-    assert found is not None
+    found = reinsert.planned_starts(ctx, 4, 0, np.inf)[0]
     assert found[1] == float(ctx.evaluator.evaluate(found[0]).costs["avg_completion"][0])
     assert found[1] < float(ctx.evaluator.evaluate(plain_start(ctx)).costs["avg_completion"][0])
 

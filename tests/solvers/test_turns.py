@@ -20,7 +20,7 @@ from service.core.check import check
 from service.core.threads import available_cores, solving
 from service.solvers import turns
 from service.solvers.registry import SolveContext
-from service.solvers.reinsert import ReinsertResult, reinsert_search
+from service.solvers.reinsert import ReinsertResult, planned_starts, reinsert_search
 from service.solvers.tabu import plain_start
 from service.solvers.turns import TurnsConfig, take_turns
 from service.solvers.turns import _reinsertion as turns_reinsertion
@@ -295,6 +295,36 @@ def test_a_lineage_that_stalled_goes_on_from_the_cheapest_lineage(
     starts, returned = run(TurnsConfig(turn_s=0.05, chains=2, behind=0.01))
     assert returned[0][0].cost > 1.01 * returned[0][1].cost  # chain 0 lags after turn 0
     assert _same(starts[1], [returned[0][1].best] * 2)
+
+
+@pytest.mark.parametrize("chains", [1, 2, 3, 5])
+def test_the_first_lineages_start_from_the_cheapest_of_the_starts_given(
+    chains: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """With other starts (``auto``'s other plans), the first turn's chains start from the
+    cheapest ``chains`` of all the starts, in the order given (the start first), and where
+    there are fewer starts than chains, the rest from copies of the cheapest; the answer is
+    valid and no dearer than the cheapest start."""
+    ctx, _, _ = _wh50()
+    plans = planned_starts(ctx, 3, 0, np.inf)  # cheapest first
+    assert len(plans) == 3 and plans[0][1] < plans[1][1] < plans[2][1]
+    (cheapest, least), middle, (start, cost) = plans  # the dearest plan the start
+    first_turn: list[list[Assignments]] = []
+
+    def recorded(ctx, starts, until, seed, cooling, pool):
+        if not first_turn:
+            first_turn.append(starts)
+        return turns_reinsertion(ctx, starts, until, seed, cooling, pool)
+
+    monkeypatch.setattr(turns, "_reinsertion", recorded)
+    others = [middle, (cheapest, least)]  # dearest first: the lineages keep the order given
+    config = TurnsConfig(turn_s=0.05, chains=chains)
+    found = take_turns(ctx, start, cost, time.monotonic() + 0.2, 0, config, others=others)
+    expected = {1: [cheapest], 2: [middle[0], cheapest], 3: [start, middle[0], cheapest],
+                5: [start, middle[0], cheapest, cheapest, cheapest]}  # fmt: skip
+    assert _same(first_turn[0], expected[chains])
+    assert found.cost <= least
+    _assert_valid(ctx, found.best, found.cost)
 
 
 def _same(xs: list[Assignments], ys: list[Assignments]) -> bool:
