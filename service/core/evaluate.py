@@ -622,9 +622,7 @@ class Evaluator:
         completion = problem.tp_time[problem.last_tp] + delay[:, self._last_event]  # (S, R)
         costs = costs_from_completion(completion)
         costs["avg_delay"] = _row_sums(delay, self._delay_weight)
-        if converged.all():  # as np.where does, without its copies
-            costs = {k: costs[k] for k in OBJECTIVES}
-        else:
+        if not converged.all():  # a converged batch's costs stand as they are (no copies)
             costs = {k: np.where(converged, costs[k], np.inf) for k in OBJECTIVES}
         return Evaluation(delay, completion, costs, converged)
 
