@@ -48,6 +48,11 @@ comes first, improving in stages:
    with the next seed whenever it stops on its own, so that an unproven answer comes
    at the deadline, not before.
 
+Beside the stages 3 and 4 (and the MILP backend's), which run ``workers`` threads,
+re-insertion turns search from the same answer on the cores the solve may take that
+they leave idle (a lone request of the service's one worker: the second of two cores),
+until those stages end; their answer is kept where cheaper (BESIDE).
+
 Small problems go straight to the exact stage (CP-SAT proves them in milliseconds).
 Robots that share no conflict, directly or through others, form independent
 components (:mod:`service.core.decompose`); for the objectives that decompose,
@@ -65,8 +70,11 @@ from __future__ import annotations
 
 import copy
 import math
+import threading
 import time
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import replace
+from typing import NamedTuple
 
 import numpy as np
 
@@ -75,13 +83,14 @@ from service.core.cliques import Cliques
 from service.core.decompose import DECOMPOSABLE, Part, join, parts
 from service.core.retype import descend_types
 from service.core.schemas import Objective
+from service.core.threads import cores_per_solve
 from service.solvers.exact import build_seconds, improve, milp_staged
 from service.solvers.lns import LNS_OBJECTIVES, lns_search
 from service.solvers.lns import MAX_ROBOTS as LNS_MAX_ROBOTS
 from service.solvers.registry import SolveContext, SolverOutput, get_solver, register
 from service.solvers.reinsert import REINSERT_OBJECTIVES, planned_starts
 from service.solvers.tabu import plain_start, tabu_search
-from service.solvers.turns import take_turns
+from service.solvers.turns import TurnsResult, take_turns
 
 __all__ = ["FIRST_STAGE_SHARE", "auto"]
 
@@ -297,6 +306,24 @@ DESCENT_OBJECTIVES = ("max_completion", "sync_completion")
 # the rule, at 1 s on the 250-robot warehouses (cut at the deadline, the first stage with
 # 30 % of the time) max_completion read 0.8778 against 0.9713.
 DESCENT_S_PER_CONFLICT = 1.25e-4
+# Whether re-insertion turns run beside the exact stages (CP-SAT LNS, CP-SAT, the MILP) on
+# the cores the solve may take that those leave idle (they run ``ctx.workers`` threads: a
+# lone request of the service's one worker left one of two cores idle), from the answer
+# those start from, until they end; the cheaper answer is kept (avg_completion,
+# avg_delay, above ``exact_max_conflicts``). On wh_two_way/25/60 at 1 s (six seeds) the
+# turns had 0.1 s (MID_TURNS_SHARE), LNS and CP-SAT then found nothing in 0.8 s, and the
+# answers read 28.01-29.70; with the turns beside, 28.01 (the best known) in all six.
+# Measured (session 68, ``python -m bench.ab --a service.solvers.portfolio.BESIDE=False``;
+# wh_two_way 25, floor_dense, floor_sparse, wh_two_way, wh_two_lane of 50 robots and the
+# sets wh_50, wh_100, geo_dense_25; cost ratio without / with, B's gain with its 95 %
+# interval, runs cheaper / dearer with, proven without / with): 1 s (six worlds a kind,
+# two seeds) 0.9955 / 0.9974, +0.0019 (+0.0001, +0.0039), 18 / 10, proven 18 / 17 (one
+# geo_dense_25 proof LNS made at 0.78 s without was not made in time); wh_two_way 25
+# 0.9928 / 0.9988, floor_dense 50 0.9937 / 0.9969; 5 s (four worlds) even, 0.9983 /
+# 0.9985, +0.0002 (-0.0005, +0.0009), 6 / 3, proven 33 / 33.
+BESIDE = True
+# The turns beside search with the request's seed plus this (not the turns' own seeds).
+BESIDE_SEED = 7_000_003
 
 
 @register("auto")
@@ -430,6 +457,39 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
             )
             verdict = f"re-insertion search to the deadline {why}"
             return replace(best, optimal=False, detail=_detail(stages, verdict))
+    tail = _Tail(uses_lns, lns_only, no_cp_sat, too_large, exact_min_s)
+    beside = None
+    if ctx.objective in REINSERT_OBJECTIVES and problem.n_conflicts > ctx.exact_max_conflicts:
+        beside = _Beside.start(ctx, best.assignment, cost, deadline)
+    try:
+        out = _exact_tail(ctx, deadline, best, cost, stages, tail)
+    finally:
+        found = None if beside is None else beside.ended()
+    return _with_beside(ctx, out, found)
+
+
+class _Tail(NamedTuple):
+    """Which of the exact stages follow the search (see :func:`_staged`)."""
+
+    uses_lns: bool  # CP-SAT LNS runs
+    lns_only: bool  # ... and is the last stage
+    no_cp_sat: bool  # no CP-SAT stage at this size
+    too_large: bool  # above ``exact_stage_max_conflicts``
+    exact_min_s: float  # the least time worth a CP-SAT stage (inf: none)
+
+
+def _exact_tail(
+    ctx: SolveContext,
+    deadline: float,
+    best: SolverOutput,
+    cost: float,
+    stages: list[str],
+    tail: _Tail,
+) -> SolverOutput:
+    """LNS then hinted CP-SAT (or the tabu polish) from ``best`` (of ``cost``, reached by
+    ``stages``) within ``deadline`` (monotonic), as ``tail`` says."""
+    problem = ctx.problem
+    uses_lns, lns_only, no_cp_sat, too_large, exact_min_s = tail
     if uses_lns:
         left = deadline - time.monotonic()
         last = lns_only or left <= exact_min_s  # no CP-SAT stage follows
@@ -474,6 +534,48 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
         return replace(best, optimal=False, detail=_detail(stages, verdict))
     improved, verdict = improve(ctx, best, left)
     return replace(improved, detail=_detail(stages, verdict))
+
+
+class _Beside:
+    """Re-insertion turns (:func:`~service.solvers.turns.take_turns`) in a thread of their
+    own, on the cores the solve may take that its exact stages leave idle (CP-SAT LNS, the
+    CP-SAT and MILP stages run ``ctx.workers`` threads), from the best answer so far until
+    the deadline or until stopped (see BESIDE)."""
+
+    def __init__(self, pool: ThreadPoolExecutor, run: Future[TurnsResult], stop: threading.Event):
+        self._pool, self._run, self._stop = pool, run, stop
+
+    @classmethod
+    def start(
+        cls, ctx: SolveContext, start: Assignments, cost: float, deadline: float
+    ) -> _Beside | None:
+        """The turns from ``start`` (of ``cost``) to ``deadline`` (monotonic), started
+        (None: BESIDE off, or no core left beside the exact stages)."""
+        if not BESIDE or cores_per_solve() <= ctx.workers:
+            return None
+        stop, pool = threading.Event(), ThreadPoolExecutor(1)
+        run = pool.submit(
+            take_turns, ctx, start, cost, deadline, ctx.seed + BESIDE_SEED,
+            held=ctx.workers, stop=stop,
+        )  # fmt: skip
+        return cls(pool, run, stop)
+
+    def ended(self) -> TurnsResult:
+        """Stops the turns (a search ends at its next step) and returns what they found."""
+        self._stop.set()
+        try:
+            return self._run.result()
+        finally:
+            self._pool.shutdown()
+
+
+def _with_beside(ctx: SolveContext, out: SolverOutput, found: TurnsResult | None) -> SolverOutput:
+    """``out``, or the answer the turns beside its exact stages ``found`` where cheaper
+    (never where ``out`` is proven optimal)."""
+    if found is None or out.optimal or found.cost >= ctx.cost(out.assignment):
+        return out
+    verdict = f"re-insertion beside them cheaper (x{found.turns} turns)"
+    return replace(out, assignment=found.best, detail=f"{out.detail}; {verdict}")
 
 
 def _lns_from(objective: str) -> str:

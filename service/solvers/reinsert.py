@@ -87,6 +87,7 @@ also bounded by the transitive closure of the fixed node order (:func:`_plan_rea
 from __future__ import annotations
 
 import heapq
+import threading
 import time
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -996,11 +997,13 @@ def reinsert_search(
     config: ReinsertConfig | None = None,
     max_steps: int | None = None,
     cooling: tuple[float, float] | None = None,
+    stop: threading.Event | None = None,
 ) -> ReinsertResult:
     """Re-insertion LNS from the valid ``start`` until ``deadline`` (monotonic) or
     ``max_steps`` steps (None: no cap), whichever comes first, or until no robot waits,
     or after ``config.whole_fleet_plateau`` steps without improvement that each
-    re-inserted the whole fleet. Returns the cheapest answer seen.
+    re-inserted the whole fleet, or once ``stop`` is set (checked before each step).
+    Returns the cheapest answer seen.
 
     ``cooling``: the (monotonic) span over which an annealed search cools, for the
     searches of turns restarted within it (default: from now to ``deadline``; with
@@ -1025,6 +1028,8 @@ def reinsert_search(
     most = max(count, min(round(config.max_share * n_robots), config.max_robots, n_robots))
     warm_from, cold_at = (time.monotonic(), deadline) if cooling is None else cooling
     while time.monotonic() < deadline and (max_steps is None or steps < max_steps):
+        if stop is not None and stop.is_set():
+            break
         if not (current.robot_delay > TOL).any():
             break  # nobody waits (delays never fall along a path): the free cost, optimal
         plateau = config.whole_fleet_plateau

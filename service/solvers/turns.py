@@ -53,6 +53,7 @@ runs cheaper without), other worlds 0.9714 -> 0.9779 (19 / 17), avg_delay 0.8840
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -183,6 +184,8 @@ def take_turns(
     seed: int,
     config: TurnsConfig | None = None,
     others: Sequence[tuple[Assignments, float]] = (),
+    held: int = 0,
+    stop: threading.Event | None = None,
 ) -> TurnsResult:
     """Re-insertion search in turns from the valid ``start`` (of ``cost``) until
     ``deadline`` (monotonic): ``config.chains`` lineages at once (by default one per core
@@ -196,7 +199,12 @@ def take_turns(
 
     ``others``: further valid starts, each with its cost (``auto``'s other plans): the
     first turn's lineages start from the cheapest of ``start`` and these, and only where
-    there are fewer than lineages from copies of the cheapest (see the module)."""
+    there are fewer than lineages from copies of the cheapest (see the module).
+
+    ``held``: cores the solve keeps for other work meanwhile (``auto``'s CP-SAT stages, see
+    :mod:`service.solvers.portfolio`, BESIDE): by default the turns take one lineage per core
+    the solve may take less these, and end at a turn where none is left. ``stop``: the turns
+    end once it is set (a search checks it before each step)."""
     config = TurnsConfig() if config is None else config
     lineages = [ReinsertResult(answer, of, 0) for answer, of in [(start, cost), *others]]
     turns = 0
@@ -206,17 +214,28 @@ def take_turns(
     cooling = (now, deadline - cold_s)  # then it searches cold
     most = config.chains or max(ctx.workers, available_cores())
     with ThreadPoolExecutor(most) if most > 1 else nullcontext() as pool:
-        while (began := time.monotonic()) < deadline:
+        while (began := time.monotonic()) < deadline and not (stop and stop.is_set()):
             until = min(deadline, began + turn_s)
-            chains = config.chains or max(ctx.workers, cores_per_solve())
+            chains = config.chains or _chains(ctx, held)
+            if chains < 1:
+                break
             began_from = _as_many(lineages, chains)
             starts = [line.best for line in began_from]
-            lineages = _reinsertion(ctx, starts, until, seed + turns, cooling, pool)
+            lineages = _reinsertion(ctx, starts, until, seed + turns, cooling, pool, stop)
             if config.meet_stalled:
                 lineages = _met(began_from, lineages, config.behind)
             turns += 1
     best = _cheapest(lineages)
     return TurnsResult(best.best, best.cost, turns)
+
+
+def _chains(ctx: SolveContext, held: int) -> int:
+    """Lineages for the next turn: one per core the solve may take now
+    (:func:`~service.core.threads.cores_per_solve`), at least ``ctx.workers`` where it holds
+    none for other work, else less the ``held`` cores (0: none left)."""
+    if held == 0:
+        return max(ctx.workers, cores_per_solve())
+    return max(cores_per_solve() - held, 0)
 
 
 def _as_many(lineages: list[ReinsertResult], n: int) -> list[ReinsertResult]:
@@ -256,17 +275,24 @@ def _reinsertion(
     seed: int,
     cooling: tuple[float, float],
     pool: ThreadPoolExecutor | None,
+    stop: threading.Event | None,
 ) -> list[ReinsertResult]:
     """A turn's re-insertion searches until ``until`` (monotonic), cooling over
     ``cooling``: search k from ``starts[k]`` with ``seed`` + k * CHAIN_SEED_STRIDE, all at
     once in ``pool``'s threads (None: one search, in this thread) -> their results in
-    that order."""
+    that order; each ends early once ``stop`` is set."""
     if pool is None or len(starts) == 1:
-        return [reinsert_search(ctx, starts[0], until, seed, cooling=cooling)]
+        return [reinsert_search(ctx, starts[0], until, seed, cooling=cooling, stop=stop)]
     runs = [
         pool.submit(
-            reinsert_search, ctx, start, until, seed + k * CHAIN_SEED_STRIDE, cooling=cooling
-        )
+            reinsert_search,
+            ctx,
+            start,
+            until,
+            seed + k * CHAIN_SEED_STRIDE,
+            cooling=cooling,
+            stop=stop,
+        )  # fmt: skip
         for k, start in enumerate(starts)
     ]
     return [run.result() for run in runs]

@@ -236,7 +236,8 @@ def test_from_lns_min_conflicts_re_insertion_follows_the_first_stage(
     original = portfolio.take_turns
 
     def recorded(ctx: Any, start: Any, cost: float, until: float, seed: int, **kw: Any) -> Any:
-        untils.append(until)
+        if "held" not in kw:  # not the turns beside LNS (see BESIDE)
+            untils.append(until)
         return original(ctx, start, cost, until, seed, **kw)
 
     monkeypatch.setattr(portfolio, "take_turns", recorded)
@@ -288,7 +289,8 @@ def test_below_lns_min_conflicts_the_first_stage_is_the_turns(
     original = portfolio.take_turns
 
     def recorded(ctx: Any, start: Any, cost: float, until: float, seed: int, **kw: Any) -> Any:
-        untils.append(until)
+        if "held" not in kw:  # not the turns beside LNS (see BESIDE)
+            untils.append(until)
         return original(ctx, start, cost, until, seed, **kw)
 
     searched: list[bool] = []
@@ -402,7 +404,8 @@ def test_the_other_plans_start_lineages_of_their_own(monkeypatch: pytest.MonkeyP
         return made[-1]
 
     def turned(ctx: Any, start: Any, cost: float, until: float, seed: int, **kw: Any) -> Any:
-        given.append((start, kw["others"]))
+        if "held" not in kw:  # not the turns beside LNS (see BESIDE)
+            given.append((start, kw["others"]))
         return take_turns(ctx, start, cost, until, seed, **kw)
 
     monkeypatch.setattr(portfolio, "planned_starts", planned)
@@ -505,3 +508,109 @@ def test_the_first_stage_answer_of_max_and_sync_gets_types_by_descent_where_chea
     assert np.array_equal(directions, first_directions)
     assert ("types by descent" in answer.solver.detail) == (descended_cost < first_cost)
     assert answer.cost <= min(descended_cost, first_cost) + 1e-9
+
+
+def _wh50_context(time_limit_s: float, first_stage: str = "priority_tabu") -> SolveContext:
+    """wh_50's first problem for avg_completion, every stage above the exact cap."""
+    line = json.loads((DATA / "wh_50.jsonl").read_text().splitlines()[0])
+    problem = problem_from_request(ScheduleRequest.model_validate(line["request"]))
+    return SolveContext(
+        problem, "avg_completion", time_limit_s, exact_max_conflicts=0, first_stage=first_stage
+    )
+
+
+def test_the_turns_beside_the_exact_stages_give_their_answer_where_cheaper(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """``auto`` (a component's stages) starts re-insertion turns beside its exact stages
+    from the answer those start from, and keeps the turns' answer where it is cheaper than
+    theirs (the exact stages here return their start unchanged), with a detail that says
+    so."""
+    import service.solvers.portfolio as portfolio
+    from service.solvers.registry import get_solver
+    from service.solvers.turns import TurnsResult
+
+    ctx = _wh50_context(0.5, first_stage="fcfs")  # a first stage that leaves room
+    good = get_solver("auto")(_wh50_context(1.0)).assignment
+    good_cost = ctx.cost(good)
+    handed: list[Assignments] = []
+
+    class Found:
+        def ended(self) -> TurnsResult:
+            return TurnsResult(good, good_cost, 3)
+
+    def started(ctx_: SolveContext, start: Assignments, cost: float, deadline: float) -> Found:
+        assert cost == ctx_.cost(start) and deadline > time.monotonic()
+        handed.append(start)
+        return Found()
+
+    def unchanged(ctx_: SolveContext, deadline: float, best: Any, *rest: Any) -> Any:
+        return best.__class__(best.assignment, optimal=False, detail="exact stages")
+
+    monkeypatch.setattr(portfolio._Beside, "start", staticmethod(started))
+    monkeypatch.setattr(portfolio, "_exact_tail", unchanged)
+    out = portfolio._staged(ctx, time.monotonic() + ctx.time_limit_s)
+    assert len(handed) == 1 and ctx.cost(handed[0]) > good_cost  # the start was dearer
+    assert out.assignment is good and not out.optimal
+    assert out.detail == "exact stages; re-insertion beside them cheaper (x3 turns)"
+
+
+@pytest.mark.parametrize("optimal", [True, False])
+def test_a_dearer_answer_of_the_turns_beside_or_any_beside_a_proof_is_not_taken(
+    optimal: bool,
+) -> None:
+    from service.solvers.portfolio import _with_beside
+    from service.solvers.registry import SolverOutput
+    from service.solvers.tabu import plain_start
+    from service.solvers.turns import TurnsResult
+
+    ctx = _wh50_context(1.0)
+    start = plain_start(ctx)
+    cost = ctx.cost(start)
+    out = SolverOutput(start, optimal=optimal, detail="exact stages")
+    assert _with_beside(ctx, out, None) is out
+    assert _with_beside(ctx, out, TurnsResult(plain_start(ctx), cost, 2)) is out  # as dear
+    cheaper = _with_beside(ctx, out, TurnsResult(plain_start(ctx), cost - 1.0, 2))
+    assert (cheaper is out) == optimal
+
+
+def test_the_turns_beside_stop_when_the_exact_stages_end_early(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Where the exact stages prove optimality early, ``auto`` (a component's stages)
+    answers at once: the turns beside them stop at their next step, not at the deadline
+    (with a spare core)."""
+    import service.solvers.portfolio as portfolio
+
+    ran: list[float] = []
+
+    def proven(ctx_: SolveContext, deadline: float, best: Any, *rest: Any) -> Any:
+        time.sleep(0.2)  # the turns beside are under way
+        ran.append(time.monotonic())
+        return best.__class__(best.assignment, optimal=True, detail="proven")
+
+    monkeypatch.setattr(portfolio, "cores_per_solve", lambda: 2)
+    monkeypatch.setattr(portfolio, "_exact_tail", proven)
+    started = portfolio._Beside.start
+    begun: list[Any] = []
+    monkeypatch.setattr(
+        portfolio._Beside, "start", staticmethod(lambda *a: begun.append(started(*a)) or begun[-1])
+    )
+    out = portfolio._staged(_wh50_context(5.0), time.monotonic() + 5.0)
+    assert out.optimal and out.detail == "proven"
+    assert len(begun) == 1 and begun[0] is not None
+    assert time.monotonic() - ran[0] < 0.3
+
+
+def test_no_turns_beside_where_off_or_no_core_is_spare(monkeypatch: pytest.MonkeyPatch) -> None:
+    import service.solvers.portfolio as portfolio
+    from service.solvers.tabu import plain_start
+
+    ctx = _wh50_context(1.0)
+    start = plain_start(ctx)
+    deadline = time.monotonic() + 1.0
+    monkeypatch.setattr(portfolio, "cores_per_solve", lambda: ctx.workers)
+    assert portfolio._Beside.start(ctx, start, ctx.cost(start), deadline) is None
+    monkeypatch.setattr(portfolio, "cores_per_solve", lambda: ctx.workers + 1)
+    monkeypatch.setattr(portfolio, "BESIDE", False)
+    assert portfolio._Beside.start(ctx, start, ctx.cost(start), deadline) is None

@@ -6,6 +6,7 @@ solve's share of the machine, read at each turn."""
 from __future__ import annotations
 
 import json
+import threading
 import time
 from contextlib import ExitStack
 from dataclasses import replace
@@ -196,14 +197,14 @@ def test_a_solve_arriving_during_the_turns_takes_its_share_from_the_next_turn(
     chains_by_turn: list[int] = []
     under_way = ExitStack()
 
-    def recorded(ctx, starts, until, seed, cooling, pool):
+    def recorded(ctx, starts, until, seed, cooling, pool, stop):
         chains_by_turn.append(len(starts))
         if len(chains_by_turn) == 2:
             under_way.enter_context(solving())  # this solve's count
             under_way.enter_context(solving())  # another arrives
         if len(chains_by_turn) == 4:
             under_way.close()
-        return turns_reinsertion(ctx, starts, until, seed, cooling, pool)
+        return turns_reinsertion(ctx, starts, until, seed, cooling, pool, stop)
 
     monkeypatch.setattr(turns, "_reinsertion", recorded)
     ctx, start, cost = _wh50()
@@ -223,7 +224,7 @@ def test_each_chain_goes_on_from_its_own_best_and_the_cheapest_lineage_is_the_an
     starts: list[list[Assignments]] = []
     returned: list[list[ReinsertResult]] = []
 
-    def fake(ctx, starts_, until, seed, cooling, pool):
+    def fake(ctx, starts_, until, seed, cooling, pool, stop):
         time.sleep(max(0.0, until - time.monotonic()))
         turn = len(starts)
         starts.append(starts_)
@@ -268,7 +269,7 @@ def test_a_lineage_that_stalled_goes_on_from_the_cheapest_lineage(
         returned: list[list[ReinsertResult]] = []
         costs = {id(start): cost}
 
-        def fake(ctx, starts_, until, seed, cooling, pool):
+        def fake(ctx, starts_, until, seed, cooling, pool, stop):
             time.sleep(max(0.0, until - time.monotonic()))
             results = []
             for k, s in enumerate(starts_):
@@ -311,10 +312,10 @@ def test_the_first_lineages_start_from_the_cheapest_of_the_starts_given(
     (cheapest, least), middle, (start, cost) = plans  # the dearest plan the start
     first_turn: list[list[Assignments]] = []
 
-    def recorded(ctx, starts, until, seed, cooling, pool):
+    def recorded(ctx, starts, until, seed, cooling, pool, stop):
         if not first_turn:
             first_turn.append(starts)
-        return turns_reinsertion(ctx, starts, until, seed, cooling, pool)
+        return turns_reinsertion(ctx, starts, until, seed, cooling, pool, stop)
 
     monkeypatch.setattr(turns, "_reinsertion", recorded)
     others = [middle, (cheapest, least)]  # dearest first: the lineages keep the order given
@@ -363,3 +364,44 @@ def test_lineages_stop_dearest_first_and_new_ones_start_from_the_cheapest() -> N
     assert turns._as_many([a, b, c], 1) == [b]
     assert turns._as_many([a, b], 4) == [a, b, b, b]
     assert turns._as_many([a], 1) == [a]
+
+
+def test_turns_end_once_stopped() -> None:
+    """A ``stop`` set while the turns search ends them at the next step, long before their
+    deadline, with a valid answer no worse than the start; set before, no step is taken."""
+    ctx, start, cost = _wh50()
+    stop = threading.Event()
+    timer = threading.Timer(0.15, stop.set)
+    begin = time.monotonic()
+    timer.start()
+    found = take_turns(ctx, start, cost, begin + 3.0, 0, stop=stop)
+    timer.join()
+    assert time.monotonic() - begin < 0.15 + 0.2
+    assert found.turns >= 1 and found.cost <= cost
+    _assert_valid(ctx, found.best, found.cost)
+    stopped = reinsert_search(ctx, start, time.monotonic() + 1.0, 0, stop=stop)
+    assert stopped.steps == 0 and stopped.best is start
+
+
+@pytest.mark.parametrize(("held", "expected"), [(0, [2, 2]), (1, [1, 1]), (2, [])])
+def test_turns_leave_the_cores_held_for_other_work(
+    monkeypatch: pytest.MonkeyPatch, held: int, expected: list[int]
+) -> None:
+    """With ``held`` cores kept for other work of the solve (``auto``'s exact stages), a turn
+    runs one lineage per core the solve may take less those, and none where none is left
+    (the start comes back); with none held, one per core."""
+    chains_by_turn: list[int] = []
+
+    def recorded(ctx, starts, until, seed, cooling, pool, stop):
+        chains_by_turn.append(len(starts))
+        return turns_reinsertion(ctx, starts, until, seed, cooling, pool, stop)
+
+    monkeypatch.setattr(turns, "_reinsertion", recorded)
+    monkeypatch.setattr(turns, "cores_per_solve", lambda: 2)
+    ctx, start, cost = _wh50()
+    config = TurnsConfig(turn_s=0.05, turn_share=1.0)
+    found = take_turns(ctx, start, cost, time.monotonic() + 0.1, 0, config, held=held)
+    assert chains_by_turn[:2] == expected
+    assert found.turns == len(chains_by_turn)
+    if not expected:
+        assert found.best is start and found.cost == cost
