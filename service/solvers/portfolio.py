@@ -51,7 +51,8 @@ comes first, improving in stages:
 Beside the stages 3 and 4 (and the MILP backend's), which run ``workers`` threads,
 re-insertion turns search from the same answer on the cores the solve may take that
 they leave idle (a lone request of the service's one worker: the second of two cores),
-until those stages end; their answer is kept where cheaper (BESIDE).
+until those stages end (on fleets where LNS may prove, from stage 4 on); their answer is
+kept where cheaper (BESIDE).
 
 Small problems go straight to the exact stage (CP-SAT proves them in milliseconds).
 Robots that share no conflict, directly or through others, form independent
@@ -72,8 +73,10 @@ import copy
 import math
 import threading
 import time
+from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import replace
+from functools import partial
 from typing import NamedTuple
 
 import numpy as np
@@ -320,7 +323,19 @@ DESCENT_S_PER_CONFLICT = 1.25e-4
 # two seeds) 0.9955 / 0.9974, +0.0019 (+0.0001, +0.0039), 18 / 10, proven 18 / 17 (one
 # geo_dense_25 proof LNS made at 0.78 s without was not made in time); wh_two_way 25
 # 0.9928 / 0.9988, floor_dense 50 0.9937 / 0.9969; 5 s (four worlds) even, 0.9983 /
-# 0.9985, +0.0002 (-0.0005, +0.0009), 6 / 3, proven 33 / 33.
+# 0.9985, +0.0002 (-0.0005, +0.0009), 6 / 3, proven 33 / 33. On other worlds (``--seed
+# 600000``: wh_two_way 25, wh_one_way, wh_mixed, floor_passages, floor_mixed, floor_dense
+# 50) at 1 s 0.9918 / 0.9933 (+0.0015, interval -0.0030 to +0.0062), but wh_two_way 25
+# 0.9960 / 0.9852, proven 7 / 5: beside LNS, the turns' steps (short at 25 robots, much of
+# them Python) took the interpreter from LNS's model building, and LNS's whole-fleet step,
+# which proves, came later or not at all. So where LNS may prove (fleets of up to
+# ``lns.MAX_ROBOTS``) the turns start with the CP-SAT stage, from LNS's answer; on larger
+# fleets with LNS (started with the CP-SAT stage everywhere instead, those worlds read
+# floor_passages 50 0.9970 -> 0.9824, floor_mixed 50 0.9963 -> 0.9902). With that rule,
+# against none, 1 s: those worlds 0.9901 / 0.9930, +0.0028 (-0.0013, +0.0090), 14 / 20 (the
+# floor_dense 50 worlds, above lns_min_conflicts, run no exact stage: their 4 / 1 is
+# noise), proven 5 / 5; the first worlds and sets 0.9955 / 0.9965, +0.0010 (-0.0003,
+# +0.0024), 19 / 13, proven 16 / 16.
 BESIDE = True
 # The turns beside search with the request's seed plus this (not the turns' own seeds).
 BESIDE_SEED = 7_000_003
@@ -457,15 +472,14 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
             )
             verdict = f"re-insertion search to the deadline {why}"
             return replace(best, optimal=False, detail=_detail(stages, verdict))
-    tail = _Tail(uses_lns, lns_only, no_cp_sat, too_large, exact_min_s)
-    beside = None
-    if ctx.objective in REINSERT_OBJECTIVES and problem.n_conflicts > ctx.exact_max_conflicts:
-        beside = _Beside.start(ctx, best.assignment, cost, deadline)
-    try:
-        out = _exact_tail(ctx, deadline, best, cost, stages, tail)
-    finally:
-        found = None if beside is None else beside.ended()
-    return _with_beside(ctx, out, found)
+    # Where LNS may prove optimality (a step that frees a whole fleet of up to LNS_MAX_ROBOTS)
+    # the turns beside wait for the CP-SAT stage (see BESIDE).
+    beside_lns = not uses_lns or problem.n_robots > LNS_MAX_ROBOTS
+    tail = _Tail(uses_lns, lns_only, no_cp_sat, too_large, exact_min_s, beside_lns)
+    if not beside_lns:
+        return _exact_tail(ctx, deadline, best, cost, stages, tail)
+    exact_tail = partial(_exact_tail, ctx, deadline, best, cost, stages, tail)
+    return _turns_beside(ctx, best.assignment, cost, deadline, exact_tail)
 
 
 class _Tail(NamedTuple):
@@ -476,6 +490,7 @@ class _Tail(NamedTuple):
     no_cp_sat: bool  # no CP-SAT stage at this size
     too_large: bool  # above ``exact_stage_max_conflicts``
     exact_min_s: float  # the least time worth a CP-SAT stage (inf: none)
+    beside_lns: bool  # the turns beside (BESIDE) run from LNS on, else from the CP-SAT stage
 
 
 def _exact_tail(
@@ -489,7 +504,7 @@ def _exact_tail(
     """LNS then hinted CP-SAT (or the tabu polish) from ``best`` (of ``cost``, reached by
     ``stages``) within ``deadline`` (monotonic), as ``tail`` says."""
     problem = ctx.problem
-    uses_lns, lns_only, no_cp_sat, too_large, exact_min_s = tail
+    uses_lns, lns_only, no_cp_sat, too_large, exact_min_s, beside_lns = tail
     if uses_lns:
         left = deadline - time.monotonic()
         last = lns_only or left <= exact_min_s  # no CP-SAT stage follows
@@ -532,8 +547,32 @@ def _exact_tail(
             else "no time for CP-SAT"
         )
         return replace(best, optimal=False, detail=_detail(stages, verdict))
-    improved, verdict = improve(ctx, best, left)
-    return replace(improved, detail=_detail(stages, verdict))
+
+    def cp_sat() -> SolverOutput:
+        improved, verdict = improve(ctx, best, left)
+        return replace(improved, detail=_detail(stages, verdict))
+
+    if beside_lns:  # already under way
+        return cp_sat()
+    return _turns_beside(ctx, best.assignment, cost, deadline, cp_sat)
+
+
+def _turns_beside(
+    ctx: SolveContext,
+    start: Assignments,
+    cost: float,
+    deadline: float,
+    stages: Callable[[], SolverOutput],
+) -> SolverOutput:
+    """What ``stages()`` answers, run with re-insertion turns beside them from ``start``
+    (of ``cost``) until they end (within ``deadline``, monotonic), or the turns' answer
+    where cheaper (see BESIDE)."""
+    beside = _Beside.start(ctx, start, cost, deadline)
+    try:
+        out = stages()
+    finally:
+        found = None if beside is None else beside.ended()
+    return _with_beside(ctx, out, found)
 
 
 class _Beside:
@@ -550,8 +589,11 @@ class _Beside:
         cls, ctx: SolveContext, start: Assignments, cost: float, deadline: float
     ) -> _Beside | None:
         """The turns from ``start`` (of ``cost``) to ``deadline`` (monotonic), started
-        (None: BESIDE off, or no core left beside the exact stages)."""
-        if not BESIDE or cores_per_solve() <= ctx.workers:
+        (None: BESIDE off, an objective or a size re-insertion does not search, or no core
+        left beside the exact stages)."""
+        searches = ctx.objective in REINSERT_OBJECTIVES
+        searches &= ctx.problem.n_conflicts > ctx.exact_max_conflicts
+        if not (BESIDE and searches) or cores_per_solve() <= ctx.workers:
             return None
         stop, pool = threading.Event(), ThreadPoolExecutor(1)
         run = pool.submit(

@@ -614,3 +614,40 @@ def test_no_turns_beside_where_off_or_no_core_is_spare(monkeypatch: pytest.Monke
     monkeypatch.setattr(portfolio, "cores_per_solve", lambda: ctx.workers + 1)
     monkeypatch.setattr(portfolio, "BESIDE", False)
     assert portfolio._Beside.start(ctx, start, ctx.cost(start), deadline) is None
+
+
+@pytest.mark.parametrize(
+    ("name", "order"), [("wh_25", ["lns", "beside"]), ("wh_50", ["beside", "lns"])]
+)
+def test_the_turns_beside_wait_for_the_cp_sat_stage_where_lns_may_prove(
+    monkeypatch: pytest.MonkeyPatch, name: str, order: list[str]
+) -> None:
+    """Where LNS may prove optimality (a fleet of up to ``lns.MAX_ROBOTS``, which a step
+    frees whole) the turns beside start with the CP-SAT stage, from LNS's answer, and leave
+    LNS's model building the interpreter; on larger fleets they start with LNS."""
+    from types import SimpleNamespace
+
+    import service.solvers.portfolio as portfolio
+
+    events: list[str] = []
+
+    def searched(ctx_: SolveContext, start: Assignments, *args: Any, **kw: Any) -> Any:
+        events.append("lns")
+        return SimpleNamespace(best=start, cost=ctx_.cost(start), steps=0, optimal=False)
+
+    started = portfolio._Beside.start
+
+    def beside(*args: Any) -> Any:
+        events.append("beside")
+        return started(*args)
+
+    monkeypatch.setattr(portfolio, "lns_search", searched)
+    monkeypatch.setattr(portfolio._Beside, "start", staticmethod(beside))
+    monkeypatch.setattr(portfolio, "cores_per_solve", lambda: 2)
+    line = json.loads((DATA / f"{name}.jsonl").read_text().splitlines()[0])
+    problem = problem_from_request(ScheduleRequest.model_validate(line["request"]))
+    assert (problem.n_robots > lns.MAX_ROBOTS) == (order[0] == "beside")
+    ctx = SolveContext(problem, "avg_completion", 1.0, exact_max_conflicts=0)
+    out = portfolio._staged(ctx, time.monotonic() + 1.0)
+    assert events == order
+    assert out.assignment is not None
