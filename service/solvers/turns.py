@@ -292,7 +292,7 @@ def _reinsertion(
             seed + k * CHAIN_SEED_STRIDE,
             cooling=cooling,
             stop=stop,
-        )  # fmt: skip
+        )
         for k, start in enumerate(starts)
     ]
     return [run.result() for run in runs]
