@@ -84,6 +84,7 @@ import numpy as np
 from service.core.assignment import Assignments
 from service.core.cliques import Cliques
 from service.core.decompose import DECOMPOSABLE, Part, join, parts
+from service.core.problem import Problem
 from service.core.retype import descend_types
 from service.core.schemas import Objective
 from service.core.threads import cores_per_solve
@@ -472,11 +473,8 @@ def _staged(ctx: SolveContext, deadline: float) -> SolverOutput:
             )
             verdict = f"re-insertion search to the deadline {why}"
             return replace(best, optimal=False, detail=_detail(stages, verdict))
-    # Where LNS may prove optimality (a step that frees a whole fleet of up to LNS_MAX_ROBOTS)
-    # the turns beside wait for the CP-SAT stage (see BESIDE).
-    beside_lns = not uses_lns or problem.n_robots > LNS_MAX_ROBOTS
-    tail = _Tail(uses_lns, lns_only, no_cp_sat, too_large, exact_min_s, beside_lns)
-    if not beside_lns:
+    tail = _Tail(uses_lns, lns_only, no_cp_sat, too_large, exact_min_s)
+    if not _beside_lns(problem, uses_lns):
         return _exact_tail(ctx, deadline, best, cost, stages, tail)
     exact_tail = partial(_exact_tail, ctx, deadline, best, cost, stages, tail)
     return _turns_beside(ctx, best.assignment, cost, deadline, exact_tail)
@@ -490,7 +488,6 @@ class _Tail(NamedTuple):
     no_cp_sat: bool  # no CP-SAT stage at this size
     too_large: bool  # above ``exact_stage_max_conflicts``
     exact_min_s: float  # the least time worth a CP-SAT stage (inf: none)
-    beside_lns: bool  # the turns beside (BESIDE) run from LNS on, else from the CP-SAT stage
 
 
 def _exact_tail(
@@ -504,7 +501,7 @@ def _exact_tail(
     """LNS then hinted CP-SAT (or the tabu polish) from ``best`` (of ``cost``, reached by
     ``stages``) within ``deadline`` (monotonic), as ``tail`` says."""
     problem = ctx.problem
-    uses_lns, lns_only, no_cp_sat, too_large, exact_min_s, beside_lns = tail
+    uses_lns, lns_only, no_cp_sat, too_large, exact_min_s = tail
     if uses_lns:
         left = deadline - time.monotonic()
         last = lns_only or left <= exact_min_s  # no CP-SAT stage follows
@@ -552,9 +549,17 @@ def _exact_tail(
         improved, verdict = improve(ctx, best, left)
         return replace(improved, detail=_detail(stages, verdict))
 
-    if beside_lns:  # already under way
+    if _beside_lns(problem, uses_lns):  # already under way
         return cp_sat()
     return _turns_beside(ctx, best.assignment, cost, deadline, cp_sat)
+
+
+def _beside_lns(problem: Problem, uses_lns: bool) -> bool:
+    """Whether the turns beside (BESIDE) start with LNS (or with the CP-SAT stage where no
+    LNS runs), not with the CP-SAT stage after it: not where LNS may prove optimality (a
+    step that frees a whole fleet of up to LNS_MAX_ROBOTS), whose model building the turns
+    would slow."""
+    return not uses_lns or problem.n_robots > LNS_MAX_ROBOTS
 
 
 def _turns_beside(

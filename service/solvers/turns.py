@@ -212,11 +212,11 @@ def take_turns(
     turn_s = min(config.turn_s, config.turn_share * (deadline - now))
     cold_s = min((1 - config.cooling_share) * (deadline - now), config.most_cold_s)
     cooling = (now, deadline - cold_s)  # then it searches cold
-    most = config.chains or max(ctx.workers, available_cores())
+    most = config.chains or max(_chains(ctx, held, available_cores()), 1)
     with ThreadPoolExecutor(most) if most > 1 else nullcontext() as pool:
         while (began := time.monotonic()) < deadline and not (stop and stop.is_set()):
             until = min(deadline, began + turn_s)
-            chains = config.chains or _chains(ctx, held)
+            chains = config.chains or _chains(ctx, held, cores_per_solve())
             if chains < 1:
                 break
             began_from = _as_many(lineages, chains)
@@ -229,13 +229,14 @@ def take_turns(
     return TurnsResult(best.best, best.cost, turns)
 
 
-def _chains(ctx: SolveContext, held: int) -> int:
-    """Lineages for the next turn: one per core the solve may take now
-    (:func:`~service.core.threads.cores_per_solve`), at least ``ctx.workers`` where it holds
-    none for other work, else less the ``held`` cores (0: none left)."""
+def _chains(ctx: SolveContext, held: int, cores: int) -> int:
+    """Lineages on ``cores`` (those the solve may take now for the next turn,
+    :func:`~service.core.threads.cores_per_solve`; the machine's for the threads kept): one
+    per core, at least ``ctx.workers`` where the solve holds none for other work, else less
+    the ``held`` cores (0: none left)."""
     if held == 0:
-        return max(ctx.workers, cores_per_solve())
-    return max(cores_per_solve() - held, 0)
+        return max(ctx.workers, cores)
+    return max(cores - held, 0)
 
 
 def _as_many(lineages: list[ReinsertResult], n: int) -> list[ReinsertResult]:
