@@ -66,9 +66,10 @@ corrects. Deterministic for a seed where the steps are capped (``max_steps``).
 
 **Annealed acceptance** (``ReinsertConfig.anneal``, default ANNEAL): a repair dearer than
 the current answer by x is kept with probability exp(-x / T), the temperature T falling
-linearly from ``anneal`` times the best cost to zero over the search (over the first
-half of its turns' time, in :mod:`service.solvers.turns`, then cold: only cheaper repairs
-kept); the search returns the cheapest answer it saw.
+linearly from ``anneal`` times the best cost (twice that from LARGE_FLEET robots:
+LARGE_HEAT) to zero over the search (over the first half of its turns' time, in
+:mod:`service.solvers.turns`, then cold: only cheaper repairs kept); the search returns
+the cheapest answer it saw.
 Keeping only cheaper repairs, it stalled: alone from the plans, on the generated
 warehouses of 100 and 250 robots, it read 0.76-0.94 of the best known after 2 s and
 barely more after 5 s with 2.5 times the steps (session 32), and two repairs a step on two
@@ -144,6 +145,29 @@ TOL = 1e-9  # delays closer than this are equal
 # 0.08 against 0.04 0.9111 / 0.9027 (40 cheaper, 20 dearer of 60), 0.02 0.9015 / 0.8985
 # (30 / 29), 0.16 against 0.08 0.9217 / 0.9139 (30 / 30); together with FLEET_SHARE see there.
 ANNEAL = 0.08
+# ... times this for fleets of LARGE_FLEET robots and more (ReinsertConfig.large_heat). Since
+# session 64's lineages and 65's meetings (each turn of a lineage starts from its own best,
+# so a hot turn is a wide kick from it), the large fleets gained from a hotter start and the
+# small ones did not. Measured (session 69, ``python -m bench.ab --b
+# service.solvers.reinsert.ReinsertConfig.anneal=0.16``, ``auto`` as the service runs it,
+# 0.08 everywhere against 0.16 everywhere; cost ratio A / B, B's gain with its 95 % interval
+# over worlds, runs cheaper / dearer with 0.16): 5 s, wh_two_way, wh_two_lane, floor_dense of
+# 100 and wh_two_way, wh_two_lane of 250 robots (three worlds, two seeds) 0.9798 / 0.9868,
+# +0.0070 (-0.0023, +0.0180), 20 / 9, every kind cheaper; other worlds (``--seed 600000``:
+# wh_two_way, wh_two_lane, wh_mixed, floor_dense of 100, wh_two_way, wh_one_way, wh_mixed
+# of 250, two worlds) 0.9804 / 0.9856, +0.0052 (-0.0026, +0.0138), 15 / 13; 1 s, the first
+# kinds (six worlds) and floor_dense, wh_two_way of 50 0.9716 / 0.9769, +0.0053 (+0.0003,
+# +0.0108), 39 / 38 (250 robots +0.011 and +0.019, floor_dense 50 -0.005); avg_delay, 1 s,
+# the first kinds (three worlds) 0.9311 / 0.9614, +0.0303 (+0.0081, +0.0522), 22 / 8; the
+# sets wh_50, wh_100, geo_dense_25 and wh_two_way 25, floor_sparse, wh_two_lane 50 (four
+# worlds) 0.9991 / 0.9982, -0.0009 (-0.0022, +0.0001), 5 / 8, proven 18 / 18 (wh_two_way
+# 25 -0.004, floor_sparse 50 -0.004); 1 s, wh_two_way, wh_two_lane, floor_dense,
+# floor_sparse of 75 (four worlds) even, 0.9866 / 0.9876, +0.0010 (-0.0056, +0.0080), 16 /
+# 14: so from 100 robots. Hotter still, 0.32 against 0.16: 1 s -0.0036 (-0.0103,
+# +0.0024), 5 s -0.0004 (-0.0098, +0.0061); cooler at 5 s, 0.04 against 0.08: -0.0057
+# (-0.0135, +0.0008).
+LARGE_HEAT = 2.0
+LARGE_FLEET = 100
 # A picked robot may pass a held partner first even where that delays the partner past
 # its latest, at a price per unit of delay past it of PUSH times the incumbent's mean slope
 # (:meth:`~service.core.evaluate.Evaluator.evaluate_with_latest`: the objective's rise
@@ -297,9 +321,17 @@ class ReinsertConfig:
     # to 0 over the search's cooling span (0: only cheaper repairs are kept); the best
     # answer seen is what the search returns. See ANNEAL.
     anneal: float = ANNEAL
+    # ... times this for fleets of ``large_fleet`` robots and more (see LARGE_HEAT)
+    large_heat: float = LARGE_HEAT
+    large_fleet: int = LARGE_FLEET
     # A unit of delay past a held robot's latest costs push x the incumbent's mean slope
     # (0: none allowed, held robots stay within their latest). See PUSH.
     push: float = PUSH
+
+    def heat(self, n_robots: int) -> float:
+        """Annealing's first temperature for a fleet of ``n_robots``, as a share of the
+        best cost: ``anneal``, times ``large_heat`` from ``large_fleet`` robots."""
+        return self.anneal * (self.large_heat if n_robots >= self.large_fleet else 1.0)
 
 
 # The ``reinsert`` solver's: small fleets grow to the whole fleet, where it stops.
@@ -1027,6 +1059,7 @@ def reinsert_search(
     count, stalled = min(count, n_robots), 0
     most = max(count, min(round(config.max_share * n_robots), config.max_robots, n_robots))
     warm_from, cold_at = (time.monotonic(), deadline) if cooling is None else cooling
+    heat = config.heat(n_robots)
     while time.monotonic() < deadline and (max_steps is None or steps < max_steps):
         if stop is not None and stop.is_set():
             break
@@ -1046,7 +1079,7 @@ def reinsert_search(
             if max_steps is None
             else steps / max_steps
         )
-        temperature = config.anneal * best_cost * (1.0 - cooled)
+        temperature = heat * best_cost * (1.0 - cooled)
         orders = config.hot_orders if temperature > 0 else config.orders
         rounds = 0 if temperature > 0 else ROOM_ROUNDS  # see ROOM_ROUNDS
         found = _best_repair(

@@ -541,6 +541,30 @@ def test_annealing_keeps_dearer_answers_and_returns_the_cheapest_seen(
     assert kept and all(new < old for old, new in kept)  # cold: only cheaper ones
 
 
+@pytest.mark.parametrize("above", [0, 1])
+def test_large_fleets_start_hotter(above: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The first temperature is ``anneal`` x the start's cost, ``large_heat`` times that
+    for fleets of ``large_fleet`` robots and more (here set at the fleet's size or one
+    above it); no annealing at all stays none."""
+    line = (DATA / "wh_25.jsonl").read_text().splitlines()[0]
+    ctx = _context(json.loads(line)["request"], "avg_completion")
+    start = plain_start(ctx)
+    start_cost = float(ctx.evaluator.evaluate(start).costs["avg_completion"][0])
+    temperatures: list[float] = []
+    original = reinsert._tolerated
+
+    def spy(temperature: float, rng: np.random.Generator) -> float:
+        temperatures.append(temperature)
+        return original(temperature, rng)
+
+    monkeypatch.setattr(reinsert, "_tolerated", spy)
+    n = ctx.problem.n_robots
+    config = reinsert.ReinsertConfig(robots=3, anneal=0.1, large_heat=3.0, large_fleet=n + above)
+    reinsert.reinsert_search(ctx, start, np.inf, 0, config, max_steps=5)
+    assert temperatures[0] == pytest.approx(0.1 * (3.0 if above == 0 else 1.0) * start_cost)
+    assert replace(config, anneal=0.0).heat(n) == 0.0
+
+
 @pytest.mark.parametrize(("anneal", "tried"), [(0.2, "hot"), (0.0, "cold")])
 def test_a_step_tries_fewer_orders_and_passages_while_hot(
     anneal: float, tried: str, monkeypatch: pytest.MonkeyPatch
