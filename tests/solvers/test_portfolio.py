@@ -12,6 +12,7 @@ import json
 import math
 import time
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -625,8 +626,6 @@ def test_the_turns_beside_wait_for_the_cp_sat_stage_where_lns_may_prove(
     """Where LNS may prove optimality (a fleet of up to ``lns.MAX_ROBOTS``, which a step
     frees whole) the turns beside start with the CP-SAT stage, from LNS's answer, and leave
     LNS's model building the interpreter; on larger fleets they start with LNS."""
-    from types import SimpleNamespace
-
     import service.solvers.portfolio as portfolio
 
     events: list[str] = []
