@@ -34,7 +34,9 @@ wh_mixed of 250 robots, six worlds a kind, two seeds, 0.9657 / 0.9695, +0.0037 (
 +0.0118), 48 / 33; other worlds (``--seed 600000``: wh_two_way, wh_two_lane, wh_mixed of
 100, floor_dense of 50, wh_two_way, wh_one_way, wh_mixed of 250) 0.9764 / 0.9849, +0.0085
 (+0.0024, +0.0152), 46 / 33 (wh_two_way 250 0.942 / 0.972); 5 s, the first kinds, four
-worlds, two seeds, even: 0.9831 / 0.9833, +0.0003 (-0.0059, +0.0061), 30 / 24.
+worlds, two seeds, even: 0.9831 / 0.9833, +0.0003 (-0.0059, +0.0061), 30 / 24. Where the
+first turn lasts RACE_LEAST_S at least and the fleet has up to RACE_MAX_ROBOTS robots, each
+core races RACE of them in it, and the cheapest go on (see RACE).
 
 Robot-priority search (:mod:`service.solvers.priority`) took a part of every cold turn
 from session 26 to session 50 (its part following the cost each search took off per
@@ -106,6 +108,30 @@ MOST_COLD_S = 1.25
 # set one 1 s 0.9570 / 0.9557 (15 / 12), 5 s 0.9827 / 0.9850 (11 / 11); set two 1 s 0.9889 / 0.9915
 # (16 / 7), 5 s 0.9860 / 0.9893 (11 / 10).
 BEHIND = 0.015
+# Lineages a chain runs in the first turn where it lasts RACE_LEAST_S at least (budgets of ~2 s
+# and more), each from a start of its own (``auto``'s plans: see take_turns' ``others``), the
+# cheapest ``chains`` going on: each races at a share of a core, and the basins a search ends in
+# are set in its first turns (docs/benchmarks.md, sessions 67 and 70), so more of them are tried
+# where a lineage has time to show which is deep. Measured (session 70, ``python -m bench.ab``,
+# ``auto`` of one worker on two cores, the first turn racing all four plans against two; cost
+# ratio A / B, B's gain with its 95 % interval over worlds, runs cheaper / dearer with B): 5 s,
+# wh_two_way, wh_two_lane, floor_dense of 100 and wh_two_way, wh_two_lane of 250 robots (three
+# worlds, two seeds) 0.9823 / 0.9869, +0.0046 (+0.0001, +0.0093), 15 / 14; other worlds
+# (``--seed 600000``: wh_two_way, wh_two_lane, wh_mixed, floor_dense of 100, wh_two_way,
+# wh_one_way, wh_mixed of 250, two worlds) 0.9845 / 0.9875, +0.0030 (-0.0072, +0.0124), 17 /
+# 11; ``--seed 700000`` (the first kinds) 0.9866 / 0.9895, +0.0029 (-0.0056, +0.0141), 11 / 18.
+# The gain is in runs that no longer end in a poor basin (floor_dense 100 +0.008, +0.019,
+# +0.024; wh_two_way 100 +0.021 on set two), the typical run a little dearer. At 1 s (turns of
+# ~0.22 s; the first kinds, six worlds) racing read 0.9729 / 0.9699, -0.0030 (-0.0113,
+# +0.0049), 27 / 31: hence the least length. At 3 s (the first kinds, three worlds) 0.9861 /
+# 0.9874, +0.0013 (-0.0041, +0.0063), 11 / 17. By fleet size, the 100-robot families gained in
+# 12 of 13 family runs (mean +0.007), the 250-robot ones lost on average (-0.003: wh_two_way
+# 250 -0.023 on set two, wh_two_lane 250 -0.010 at 3 s), where a racing lineage's share of a
+# core makes too few steps (~300 a second a core) to show its basin: hence fleets of up to
+# RACE_MAX_ROBOTS race.
+RACE = 2
+RACE_LEAST_S = 0.5
+RACE_MAX_ROBOTS = 150
 # Chain k > 0 of a turn (see TurnsConfig.chains) searches with the turn's seed plus k times
 # this: no two chains of the turns of one search share a seed.
 CHAIN_SEED_STRIDE = 1_000_003
@@ -166,6 +192,11 @@ class TurnsConfig:
     meet_stalled: bool = True
     # ... and where it ended more than this share dearer than the cheapest (inf: stalled alone)
     behind: float = BEHIND
+    # Lineages per chain in a first turn of race_least_s at least, from as many starts (see RACE;
+    # 1: none race)
+    race: int = RACE
+    race_least_s: float = RACE_LEAST_S
+    race_max_robots: int = RACE_MAX_ROBOTS  # ... in fleets of up to this many robots
 
 
 class TurnsResult(NamedTuple):
@@ -199,7 +230,9 @@ def take_turns(
 
     ``others``: further valid starts, each with its cost (``auto``'s other plans): the
     first turn's lineages start from the cheapest of ``start`` and these, and only where
-    there are fewer than lineages from copies of the cheapest (see the module).
+    there are fewer than lineages from copies of the cheapest (see the module); a first
+    turn of ``config.race_least_s`` at least, in a fleet of up to ``config.race_max_robots``,
+    runs ``config.race`` lineages a chain (as many as there are starts at most; see RACE).
 
     ``held``: cores the solve keeps for other work meanwhile (``auto``'s CP-SAT stages, see
     :mod:`service.solvers.portfolio`, BESIDE): by default the turns take one lineage per core
@@ -213,12 +246,19 @@ def take_turns(
     cold_s = min((1 - config.cooling_share) * (deadline - now), config.most_cold_s)
     cooling = (now, deadline - cold_s)  # then it searches cold
     most = config.chains or max(_chains(ctx, held, available_cores()), 1)
+    races = (  # the first turn's lineages race (see RACE)
+        turn_s >= config.race_least_s and ctx.problem.n_robots <= config.race_max_robots
+    )
+    if races:
+        most = _racers(config, most, len(lineages))
     with ThreadPoolExecutor(most) if most > 1 else nullcontext() as pool:
         while (began := time.monotonic()) < deadline and not (stop and stop.is_set()):
             until = min(deadline, began + turn_s)
             chains = config.chains or _chains(ctx, held, cores_per_solve())
             if chains < 1:
                 break
+            if races and turns == 0:
+                chains = _racers(config, chains, len(lineages))
             began_from = _as_many(lineages, chains)
             starts = [line.best for line in began_from]
             lineages = _reinsertion(ctx, starts, until, seed + turns, cooling, pool, stop)
@@ -237,6 +277,12 @@ def _chains(ctx: SolveContext, held: int, cores: int) -> int:
     if held == 0:
         return max(ctx.workers, cores)
     return max(cores - held, 0)
+
+
+def _racers(config: TurnsConfig, chains: int, starts: int) -> int:
+    """Lineages of a first turn that races (see RACE): ``config.race`` a chain, as many as
+    there are ``starts`` at most, ``chains`` at least."""
+    return max(chains, min(config.race * chains, starts))
 
 
 def _as_many(lineages: list[ReinsertResult], n: int) -> list[ReinsertResult]:

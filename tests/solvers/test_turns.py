@@ -328,6 +328,51 @@ def test_the_first_lineages_start_from_the_cheapest_of_the_starts_given(
     _assert_valid(ctx, found.best, found.cost)
 
 
+@pytest.mark.parametrize(
+    ("chains", "plans", "turn_s", "most", "racers"),
+    [(1, 3, 0.05, 50, 2), (2, 3, 0.05, 50, 4), (2, 2, 0.05, 50, 3), (3, 3, 0.05, 50, 4),
+     (2, 3, 0.04, 50, 2), (2, 3, 0.05, 49, 2)],
+)  # fmt: skip
+def test_a_long_enough_first_turn_races_more_starts_and_the_cheapest_go_on(
+    chains: int,
+    plans: int,
+    turn_s: float,
+    most: int,
+    racers: int,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A first turn of ``race_least_s`` at least, in a fleet of up to ``race_max_robots``
+    (``most``; the fleet has 50), runs ``race`` lineages a chain, from the cheapest starts
+    in the order given (as many as there are at most, ``chains`` at least); the next turn's
+    ``chains`` lineages go on from the cheapest of them (after their meeting, see
+    ``_met``). A shorter first turn, or a larger fleet, runs ``chains`` lineages."""
+    ctx, start, cost = _wh50()
+    others = planned_starts(ctx, plans, 0, np.inf)
+    by_turn: list[list[Assignments]] = []
+    ended: list[list[ReinsertResult]] = []
+
+    def recorded(ctx, starts, until, seed, cooling, pool, stop):
+        by_turn.append(starts)
+        ended.append(turns_reinsertion(ctx, starts, until, seed, cooling, pool, stop))
+        return ended[-1]
+
+    monkeypatch.setattr(turns, "_reinsertion", recorded)
+    config = TurnsConfig(
+        turn_s=turn_s, turn_share=1.0, chains=chains, race_least_s=0.05, race_max_robots=most
+    )
+    assert ctx.problem.n_robots == 50
+    found = take_turns(ctx, start, cost, time.monotonic() + 0.15, 0, config, others=others)
+    every = [(start, cost), *others]
+    cheapest = sorted(range(len(every)), key=lambda k: every[k][1])[:racers]
+    assert _same(by_turn[0], [every[k][0] for k in sorted(cheapest)])
+    assert len(by_turn[1]) == chains
+    began = [ReinsertResult(every[k][0], every[k][1], 0) for k in sorted(cheapest)]
+    met = turns._met(began, ended[0], config.behind)
+    going_on = sorted(range(len(met)), key=lambda k: met[k].cost)[:chains]
+    assert _same(by_turn[1], [met[k].best for k in sorted(going_on)])
+    _assert_valid(ctx, found.best, found.cost)
+
+
 def _same(xs: list[Assignments], ys: list[Assignments]) -> bool:
     """The same answers (the very objects), in the same order."""
     return len(xs) == len(ys) and all(x is y for x, y in zip(xs, ys, strict=True))
