@@ -125,7 +125,7 @@ BEHIND = 0.015
 # ~0.22 s; the first kinds, six worlds) racing read 0.9729 / 0.9699, -0.0030 (-0.0113,
 # +0.0049), 27 / 31: hence the least length. At 3 s (the first kinds, three worlds) 0.9861 /
 # 0.9874, +0.0013 (-0.0041, +0.0063), 17 / 11. By fleet size, the 100-robot families gained in
-# 12 of 13 family runs (mean +0.007), the 250-robot ones lost on average (-0.003: wh_two_way
+# 10 of 13 family runs (mean +0.007), the 250-robot ones lost on average (-0.003: wh_two_way
 # 250 -0.023 on set two, wh_two_lane 250 -0.010 at 3 s), where a racing lineage's share of a
 # core makes too few steps (~300 a second a core) to show its basin: hence fleets of up to
 # RACE_MAX_ROBOTS race.
