@@ -329,7 +329,7 @@ def test_the_first_lineages_start_from_the_cheapest_of_the_starts_given(
 
 
 @pytest.mark.parametrize(
-    ("chains", "plans", "turn_s", "most", "racers"),
+    ("chains", "plans", "turn_s", "largest", "racers"),
     [(1, 3, 0.05, 50, 2), (2, 3, 0.05, 50, 4), (2, 2, 0.05, 50, 3), (3, 3, 0.05, 50, 4),
      (2, 3, 0.04, 50, 2), (2, 3, 0.05, 49, 2)],
 )  # fmt: skip
@@ -337,12 +337,12 @@ def test_a_long_enough_first_turn_races_more_starts_and_the_cheapest_go_on(
     chains: int,
     plans: int,
     turn_s: float,
-    most: int,
+    largest: int,
     racers: int,
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     """A first turn of ``race_least_s`` at least, in a fleet of up to ``race_max_robots``
-    (``most``; the fleet has 50), runs ``race`` lineages a chain, from the cheapest starts
+    (``largest``; the fleet has 50), runs ``race`` lineages a chain, from the cheapest starts
     in the order given (as many as there are at most, ``chains`` at least); the next turn's
     ``chains`` lineages go on from the cheapest of them (after their meeting, see
     ``_met``). A shorter first turn, or a larger fleet, runs ``chains`` lineages."""
@@ -358,7 +358,7 @@ def test_a_long_enough_first_turn_races_more_starts_and_the_cheapest_go_on(
 
     monkeypatch.setattr(turns, "_reinsertion", recorded)
     config = TurnsConfig(
-        turn_s=turn_s, turn_share=1.0, chains=chains, race_least_s=0.05, race_max_robots=most
+        turn_s=turn_s, turn_share=1.0, chains=chains, race_least_s=0.05, race_max_robots=largest
     )
     assert ctx.problem.n_robots == 50
     found = take_turns(ctx, start, cost, time.monotonic() + 0.15, 0, config, others=others)
