@@ -331,7 +331,7 @@ def test_the_first_lineages_start_from_the_cheapest_of_the_starts_given(
 @pytest.mark.parametrize(
     ("chains", "plans", "turn_s", "largest", "racers"),
     [(1, 3, 0.05, 50, 2), (2, 3, 0.05, 50, 4), (2, 2, 0.05, 50, 3), (3, 3, 0.05, 50, 4),
-     (2, 3, 0.04, 50, 2), (2, 3, 0.05, 49, 2)],
+     (2, 3, 0.04, 50, 2), (2, 3, 0.04, 49, 2)],
 )  # fmt: skip
 def test_a_long_enough_first_turn_races_more_starts_and_the_cheapest_go_on(
     chains: int,
@@ -341,11 +341,12 @@ def test_a_long_enough_first_turn_races_more_starts_and_the_cheapest_go_on(
     racers: int,
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    """A first turn of ``race_least_s`` at least, in a fleet of up to ``race_max_robots``
-    (``largest``; the fleet has 50), runs ``race`` lineages a chain, from the cheapest starts
-    in the order given (as many as there are at most, ``chains`` at least); the next turn's
-    ``chains`` lineages go on from the cheapest of them (after their meeting, see
-    ``_met``). A shorter first turn, or a larger fleet, runs ``chains`` lineages."""
+    """A first turn of ``race_least_s`` at least, in a fleet of up to
+    ``race_at_once_max_robots`` (``largest``; the fleet has 50), runs ``race`` lineages a
+    chain, from the cheapest starts in the order given (as many as there are at most,
+    ``chains`` at least); the next turn's ``chains`` lineages go on from the cheapest of them
+    (after their meeting, see ``_met``). A shorter first turn, in a fleet of any size, runs
+    ``chains`` lineages."""
     ctx, start, cost = _wh50()
     others = planned_starts(ctx, plans, 0, np.inf)
     by_turn: list[list[Assignments]] = []
@@ -358,7 +359,11 @@ def test_a_long_enough_first_turn_races_more_starts_and_the_cheapest_go_on(
 
     monkeypatch.setattr(turns, "_reinsertion", recorded)
     config = TurnsConfig(
-        turn_s=turn_s, turn_share=1.0, chains=chains, race_least_s=0.05, race_max_robots=largest
+        turn_s=turn_s,
+        turn_share=1.0,
+        chains=chains,
+        race_least_s=0.05,
+        race_at_once_max_robots=largest,
     )
     assert ctx.problem.n_robots == 50
     found = take_turns(ctx, start, cost, time.monotonic() + 0.15, 0, config, others=others)
@@ -370,6 +375,53 @@ def test_a_long_enough_first_turn_races_more_starts_and_the_cheapest_go_on(
     met = turns._met(began, ended[0], config.behind)
     going_on = sorted(range(len(met)), key=lambda k: met[k].cost)[:chains]
     assert _same(by_turn[1], [met[k].best for k in sorted(going_on)])
+    _assert_valid(ctx, found.best, found.cost)
+
+
+@pytest.mark.parametrize(("chains", "race"), [(1, 2), (2, 2), (1, 3), (2, 1)])
+def test_a_larger_fleet_races_in_turns_of_its_own_and_the_cheapest_go_on(
+    chains: int, race: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """In a fleet above ``race_at_once_max_robots``, a first turn of ``race_least_s`` at
+    least starts a race in turns: the cheapest ``race`` times ``chains`` starts, ``chains``
+    a turn, cheapest first, each turn from starts of its own (no meeting between them);
+    the turn after them goes on from the cheapest ``chains`` of all that those turns
+    ended with, in the order they ran. With ``race`` 1 nothing races: the first turn
+    starts from the cheapest starts in the order given, the next from their meeting."""
+    ctx, start, cost = _wh50()
+    every = [(start, cost), *planned_starts(ctx, 4, 0, np.inf)]  # five starts
+    by_turn: list[list[Assignments]] = []
+    ended: list[list[ReinsertResult]] = []
+
+    def recorded(ctx, starts, until, seed, cooling, pool, stop):
+        by_turn.append(starts)
+        if race > 1 and len(by_turn) == 2:  # the second turn finds nothing: its starts back
+            ended.append([ReinsertResult(a, cost_of[id(a)], 0) for a in starts])
+        else:
+            ended.append(turns_reinsertion(ctx, starts, until, seed, cooling, pool, stop))
+        return ended[-1]
+
+    cost_of = {id(answer): of for answer, of in every}
+    monkeypatch.setattr(turns, "_reinsertion", recorded)
+    config = TurnsConfig(
+        turn_s=0.05, turn_share=1.0, chains=chains, race=race, race_least_s=0.05,
+        race_at_once_max_robots=49,
+    )  # fmt: skip
+    found = take_turns(ctx, start, cost, time.monotonic() + 0.3, 0, config, others=every[1:])
+    by_cost = sorted(range(len(every)), key=lambda k: every[k][1])
+    if race == 1:
+        assert _same(by_turn[0], [every[k][0] for k in sorted(by_cost[:chains])])
+        began = [ReinsertResult(every[k][0], every[k][1], 0) for k in sorted(by_cost[:chains])]
+        met = turns._met(began, ended[0], config.behind)
+        assert _same(by_turn[1], [line.best for line in met])
+    else:
+        assert len(by_turn) > race
+        for turn in range(race):
+            racers = by_cost[turn * chains : (turn + 1) * chains]
+            assert _same(by_turn[turn], [every[k][0] for k in racers])
+        raced = [line for lines in ended[:race] for line in lines]
+        going_on = sorted(range(len(raced)), key=lambda k: raced[k].cost)[:chains]
+        assert _same(by_turn[race], [raced[k].best for k in sorted(going_on)])
     _assert_valid(ctx, found.best, found.cost)
 
 
