@@ -407,7 +407,7 @@ def test_a_larger_fleet_races_in_turns_of_its_own_and_the_cheapest_go_on(
         turn_s=0.05, turn_share=1.0, chains=chains, race=race, race_least_s=0.05,
         race_at_once_max_robots=49,
     )  # fmt: skip
-    found = take_turns(ctx, start, cost, time.monotonic() + 0.3, 0, config, others=every[1:])
+    found = take_turns(ctx, start, cost, time.monotonic() + 0.4, 0, config, others=every[1:])
     by_cost = sorted(range(len(every)), key=lambda k: every[k][1])
     if race == 1:
         assert _same(by_turn[0], [every[k][0] for k in sorted(by_cost[:chains])])
