@@ -35,9 +35,8 @@ wh_mixed of 250 robots, six worlds a kind, two seeds, 0.9657 / 0.9695, +0.0037 (
 100, floor_dense of 50, wh_two_way, wh_one_way, wh_mixed of 250) 0.9764 / 0.9849, +0.0085
 (+0.0024, +0.0152), 46 / 33 (wh_two_way 250 0.942 / 0.972); 5 s, the first kinds, four
 worlds, two seeds, even: 0.9831 / 0.9833, +0.0003 (-0.0059, +0.0061), 30 / 24. Where the
-first turn lasts RACE_LEAST_S at least, RACE lineages a core race from as many starts and the
-cheapest go on: all in the first turn in fleets of up to RACE_AT_ONCE_MAX_ROBOTS robots, in RACE
-turns of their own in larger ones (see RACE).
+first turn lasts RACE_LEAST_S at least, RACE lineages a core race from as many starts, in RACE
+turns of their own, and the cheapest go on (see RACE).
 
 Robot-priority search (:mod:`service.solvers.priority`) took a part of every cold turn
 from session 26 to session 50 (its part following the cost each search took off per
@@ -110,53 +109,44 @@ MOST_COLD_S = 1.25
 # (16 / 7), 5 s 0.9860 / 0.9893 (11 / 10).
 BEHIND = 0.015
 # Lineages a chain races where the first turn lasts RACE_LEAST_S at least (budgets of ~2 s and
-# more), each from a start of its own (``auto``'s plans: see take_turns' ``others``), the
-# cheapest ``chains`` going on; in fleets of up to RACE_AT_ONCE_MAX_ROBOTS all in the first turn,
-# each at a share of a core (larger fleets: see below). The basins a search ends in
-# are set in its first turns (docs/benchmarks.md, sessions 67 and 70), so more of them are tried
-# where a lineage has time to show which is deep. Measured (session 70, ``python -m bench.ab``,
-# ``auto`` of one worker on two cores, the first turn racing all four plans against two; cost
-# ratio A / B, B's gain with its 95 % interval over worlds, runs cheaper / dearer with B): 5 s,
-# wh_two_way, wh_two_lane, floor_dense of 100 and wh_two_way, wh_two_lane of 250 robots (three
-# worlds, two seeds) 0.9823 / 0.9869, +0.0046 (+0.0001, +0.0093), 15 / 14; other worlds
-# (``--seed 600000``: wh_two_way, wh_two_lane, wh_mixed, floor_dense of 100, wh_two_way,
-# wh_one_way, wh_mixed of 250, two worlds) 0.9845 / 0.9875, +0.0030 (-0.0072, +0.0124), 17 /
-# 11; ``--seed 700000`` (the first kinds) 0.9866 / 0.9895, +0.0029 (-0.0056, +0.0141), 11 / 18.
-# The gain is in runs that no longer end in a poor basin (floor_dense 100 +0.008, +0.019,
-# +0.024; wh_two_way 100 +0.021 on set two), the typical run a little dearer. At 1 s (turns of
-# ~0.22 s; the first kinds, six worlds) racing read 0.9729 / 0.9699, -0.0030 (-0.0113,
-# +0.0049), 27 / 31: hence the least length. At 3 s (the first kinds, three worlds) 0.9861 /
-# 0.9874, +0.0013 (-0.0041, +0.0063), 17 / 11. By fleet size, the 100-robot families gained in
-# 10 of 13 family runs (mean +0.007), the 250-robot ones lost on average (-0.003: wh_two_way
-# 250 -0.023 on set two, wh_two_lane 250 -0.010 at 3 s), where a racing lineage's share of a
-# core makes too few steps (~300 a second a core) to show its basin: hence fleets of up to
-# RACE_AT_ONCE_MAX_ROBOTS race at once. The rule as shipped against none (``--b
-# service.solvers.turns.TurnsConfig.race=1``), 5 s, set two's kinds on new worlds (``--seed
-# 800000``, two worlds, two seeds): even, 0.9894 / 0.9900 without, +0.0006 (-0.0034, +0.0042),
-# racing cheaper in 10, dearer in 14 (the 100-robot families -0.001 with racing, floor_dense 100
-# -0.006; the 250-robot ones, the same code in both, spread -0.008 to +0.008). Again on other
-# worlds (session 71, ``--seed 900000``: wh_two_way, wh_two_lane, floor_dense, wh_mixed of 100,
-# three worlds, two seeds): 0.9964 (racing) / 0.9941 (none), +0.0023 for racing (-0.0001,
-# +0.0048), cheaper in 15, dearer in 8, every kind cheaper (+0.001 to +0.004).
-#
-# Larger fleets race in turns (session 71): the first turn runs the cheapest ``chains`` starts,
-# each on a core of its own, the next turn the next ``chains``, and so on (RACE turns), and the
-# cheapest ``chains`` of them all go on. Measured (``python -m bench.ab``, ``auto`` of one worker
-# on two cores, an ad hoc flag, racing in two turns against none; wh_two_way, wh_two_lane,
-# wh_one_way, wh_mixed of 250 robots, three worlds, two seeds; cost ratio none / racing,
-# racing's gain with its 95 % interval over worlds, runs cheaper / dearer with racing): 5 s
-# 0.9750 / 0.9775, +0.0024 (-0.0053, +0.0103), 11 / 13; other worlds (``--seed 600000``) 0.9828
-# / 0.9898, +0.0070 (-0.0031, +0.0213), 13 / 11 (wh_one_way 250 +0.025); 3 s, ``--seed 700000``,
-# 0.9745 / 0.9824, +0.0079 (-0.0078, +0.0269), 15 / 9 (wh_one_way 250 +0.019, wh_mixed 250
-# +0.011). The rule as shipped against none (``--b service.solvers.turns.TurnsConfig.race=1``),
-# 5 s, ``--seed 800000``: 0.9783 (racing) / 0.9771 (none), +0.0012 for racing (-0.0148,
-# +0.0194), racing cheaper in 8, dearer in 16 (wh_one_way 250 +0.038 for racing, wh_two_lane 250
-# -0.026, wh_two_way 250 -0.009). Over the four sets +0.0046 on average, racing cheaper in 47 of
-# 96 runs: the gain is in runs that no longer end in a poor basin (wh_one_way 250 +0.007 to
-# +0.038 in every set), the typical run a little dearer (wh_two_lane 250 -0.026 to +0.002).
+# more), each from a start of its own (``auto``'s plans: see take_turns' ``others``), in RACE
+# turns of their own: the first turn runs the cheapest ``chains`` starts, each on a core of its
+# own, the next turn the next ``chains``, and the cheapest ``chains`` of them all go on (no
+# meeting between them). The basins a search ends in are set in its first turns
+# (docs/benchmarks.md, sessions 67 and 70), so more of them are tried where a lineage has time
+# to show which is deep. Measured (``python -m bench.ab``, ``auto`` of one worker on two cores;
+# cost ratio A / B, B's gain with its 95 % interval over worlds, runs A cheaper / dearer; the
+# figures by kind in docs/benchmarks.md, sessions 70 and 71):
+# - Session 70, racing at once (each core ran RACE lineages in the first turn, at a share of
+#   the core) against none, 5 s: wh_two_way, wh_two_lane, floor_dense of 100 and wh_two_way,
+#   wh_two_lane of 250 robots (three worlds, two seeds) 0.9823 / 0.9869, +0.0046 (+0.0001,
+#   +0.0093), 14 / 15; ``--seed 600000`` (wh_two_way, wh_two_lane, wh_mixed, floor_dense of 100,
+#   wh_two_way, wh_one_way, wh_mixed of 250, two worlds) +0.0030 (-0.0072, +0.0124); ``--seed
+#   700000`` +0.0029 (-0.0056, +0.0141); 3 s +0.0013 (-0.0041, +0.0063); at 1 s (turns of ~0.22
+#   s) -0.0030 (-0.0113, +0.0049): hence the least length. The 100-robot families gained (+0.007
+#   in 10 of 13 family runs: runs that no longer end in a poor basin, the typical run a little
+#   dearer), the 250-robot ones lost (-0.003), where a racer on half a core makes too few steps
+#   to show its basin; so at once only up to 150 robots, then (``--seed 800000``) even against
+#   none, and (session 71, ``--seed 900000``, wh_two_way, wh_two_lane, floor_dense, wh_mixed of
+#   100, three worlds) 0.9941 (none) / 0.9964, +0.0023 (-0.0001, +0.0048), 8 / 15.
+# - Session 71, in turns against none at 250 robots (wh_two_way, wh_two_lane, wh_one_way,
+#   wh_mixed, three worlds, two seeds): 5 s 0.9750 / 0.9775, +0.0024 (-0.0053, +0.0103), 13 /
+#   11; ``--seed 600000`` 0.9828 / 0.9898, +0.0070 (-0.0031, +0.0213), 11 / 13; 3 s, ``--seed
+#   700000``, 0.9745 / 0.9824, +0.0079 (-0.0078, +0.0269), 9 / 15; ``--seed 800000`` 0.9771 /
+#   0.9783, +0.0012 (-0.0148, +0.0194), 16 / 8. Over the four +0.0046, racing cheaper in 47 of
+#   96 runs: the gain is in runs that no longer end in a poor basin (wh_one_way 250 +0.007 to
+#   +0.038 in every set), the typical run a little dearer (wh_two_lane 250 -0.026 to +0.002).
+# - Session 71, in turns against at once at 100 robots (wh_two_way, wh_two_lane, floor_dense,
+#   wh_mixed, three worlds, two seeds), 5 s: 0.9882 / 0.9940, +0.0057 (+0.0012, +0.0114), 7 /
+#   13; ``--seed 900000`` 0.9951 / 0.9948, -0.0003 (-0.0039, +0.0035), 11 / 9; ``--seed
+#   600000`` 0.9936 / 0.9941 (the 100-robot kinds), 8 / 15. In turns at every size, then: no
+#   worse where racing at once paid, and one way to race instead of two.
+# Racing three lineages a core from six plans (``race`` 3, ``portfolio.PLANNED_ORDERS`` 6;
+# racing at once at 100 robots, in turns at 250), 5 s, session 70's first kinds: even, 0.9843 /
+# 0.9839, -0.0005 (-0.0061, +0.0041). At 1 s in turns (``race_least_s`` 0.2: two of the ~4
+# turns of a 250-robot fleet racing): 0.9628 / 0.9586, -0.0042 (-0.0120, +0.0036), 21 / 11.
 RACE = 2
 RACE_LEAST_S = 0.5
-RACE_AT_ONCE_MAX_ROBOTS = 150
 # Chain k > 0 of a turn (see TurnsConfig.chains) searches with the turn's seed plus k times
 # this: no two chains of the turns of one search share a seed.
 CHAIN_SEED_STRIDE = 1_000_003
@@ -217,12 +207,10 @@ class TurnsConfig:
     meet_stalled: bool = True
     # ... and where it ended more than this share dearer than the cheapest (inf: stalled alone)
     behind: float = BEHIND
-    # Lineages per chain that race where the first turn lasts race_least_s at least, from as many
-    # starts (see RACE; 1: none race) ...
+    # Lineages per chain that race, in turns of their own, where the first turn lasts
+    # race_least_s at least, from as many starts (see RACE; 1: none race)
     race: int = RACE
     race_least_s: float = RACE_LEAST_S
-    # ... all in the first turn in fleets of up to this many robots, in turns of their own above
-    race_at_once_max_robots: int = RACE_AT_ONCE_MAX_ROBOTS
 
 
 class TurnsResult(NamedTuple):
@@ -258,9 +246,8 @@ def take_turns(
     first turn's lineages start from the cheapest of ``start`` and these, and only where
     there are fewer than lineages from copies of the cheapest (see the module). Where the
     first turn lasts ``config.race_least_s`` at least, ``config.race`` lineages a chain race
-    (as many as there are starts at most; see RACE): in a fleet of up to
-    ``config.race_at_once_max_robots`` all in the first turn, else ``chains`` a turn, the
-    cheapest starts first, in turns of their own; then the cheapest ``chains`` go on.
+    (as many as there are starts at most; see RACE), ``chains`` a turn, the cheapest starts
+    first, in turns of their own; then the cheapest ``chains`` go on.
 
     ``held``: cores the solve keeps for other work meanwhile (``auto``'s CP-SAT stages, see
     :mod:`service.solvers.portfolio`, BESIDE): by default the turns take one lineage per core
@@ -274,10 +261,7 @@ def take_turns(
     cold_s = min((1 - config.cooling_share) * (deadline - now), config.most_cold_s)
     cooling = (now, deadline - cold_s)  # then it searches cold
     most = config.chains or max(_chains(ctx, held, available_cores()), 1)
-    races = turn_s >= config.race_least_s  # the first lineages race (see RACE) ...
-    at_once = races and ctx.problem.n_robots <= config.race_at_once_max_robots  # ... in one turn
-    if at_once:
-        most = _racers(config, most, len(lineages))
+    races = turn_s >= config.race_least_s  # the first lineages race (see RACE)
     waiting: list[ReinsertResult] = []  # starts that race in turns of their own, still to run
     raced: list[ReinsertResult] = []  # ... and what the turns that raced ended with so far
     with ThreadPoolExecutor(most) if most > 1 else nullcontext() as pool:
@@ -287,17 +271,14 @@ def take_turns(
             if chains < 1:
                 break
             if races and turns == 0:
-                if at_once:
-                    chains = _racers(config, chains, len(lineages))
-                else:
-                    waiting = _racing_in_turns(config, chains, lineages)
+                waiting = _racing_in_turns(config, chains, lineages)
             if waiting:
                 began_from, waiting = waiting[:chains], waiting[chains:]
             else:
                 began_from = _as_many(lineages, chains)
             starts = [line.best for line in began_from]
             ended = _reinsertion(ctx, starts, until, seed + turns, cooling, pool, stop)
-            if raced or waiting:  # a turn of a race in turns: every racer so far, unmet
+            if raced or waiting:  # a turn of the race: every racer so far, unmet
                 raced += ended
                 lineages = raced
                 raced = raced if waiting else []
@@ -320,16 +301,10 @@ def _chains(ctx: SolveContext, held: int, cores: int) -> int:
     return max(cores - held, 0)
 
 
-def _racers(config: TurnsConfig, chains: int, starts: int) -> int:
-    """Lineages of a first turn that races (see RACE): ``config.race`` a chain, as many as
-    there are ``starts`` at most, ``chains`` at least."""
-    return max(chains, min(config.race * chains, starts))
-
-
 def _racing_in_turns(
     config: TurnsConfig, chains: int, lineages: list[ReinsertResult]
 ) -> list[ReinsertResult]:
-    """The starts of a race in turns (see RACE), cheapest first, ``chains`` a turn: the
+    """The starts of a race (see RACE), cheapest first, ``chains`` a turn: the
     cheapest ``config.race`` times ``chains`` of ``lineages``; none (no race) where that
     is no more than ``chains``."""
     racers = sorted(lineages, key=lambda line: line.cost)[: config.race * chains]

@@ -329,73 +329,37 @@ def test_the_first_lineages_start_from_the_cheapest_of_the_starts_given(
 
 
 @pytest.mark.parametrize(
-    ("chains", "plans", "turn_s", "largest", "racers"),
-    [(1, 3, 0.05, 50, 2), (2, 3, 0.05, 50, 4), (2, 2, 0.05, 50, 3), (3, 3, 0.05, 50, 4),
-     (2, 3, 0.04, 50, 2), (2, 3, 0.04, 49, 2)],
-)  # fmt: skip
-def test_a_long_enough_first_turn_races_more_starts_and_the_cheapest_go_on(
-    chains: int,
-    plans: int,
-    turn_s: float,
-    largest: int,
-    racers: int,
-    monkeypatch: pytest.MonkeyPatch,
+    ("chains", "race", "turn_s"),
+    [
+        (1, 2, 0.05),
+        (2, 2, 0.05),
+        (1, 3, 0.05),
+        (3, 2, 0.05),
+        (2, 1, 0.05),
+        (2, 2, 0.04),
+        (5, 2, 0.05),
+    ],
+)
+def test_a_long_enough_first_turn_races_the_cheapest_starts_in_turns_of_their_own(
+    chains: int, race: int, turn_s: float, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """A first turn of ``race_least_s`` at least, in a fleet of up to
-    ``race_at_once_max_robots`` (``largest``; the fleet has 50), runs ``race`` lineages a
-    chain, from the cheapest starts in the order given (as many as there are at most,
-    ``chains`` at least); the next turn's ``chains`` lineages go on from the cheapest of them
-    (after their meeting, see ``_met``). A shorter first turn, in a fleet of any size, runs
-    ``chains`` lineages."""
-    ctx, start, cost = _wh50()
-    others = planned_starts(ctx, plans, 0, np.inf)
-    by_turn: list[list[Assignments]] = []
-    ended: list[list[ReinsertResult]] = []
-
-    def recorded(ctx, starts, until, seed, cooling, pool, stop):
-        by_turn.append(starts)
-        ended.append(turns_reinsertion(ctx, starts, until, seed, cooling, pool, stop))
-        return ended[-1]
-
-    monkeypatch.setattr(turns, "_reinsertion", recorded)
-    config = TurnsConfig(
-        turn_s=turn_s,
-        turn_share=1.0,
-        chains=chains,
-        race_least_s=0.05,
-        race_at_once_max_robots=largest,
-    )
-    assert ctx.problem.n_robots == 50
-    found = take_turns(ctx, start, cost, time.monotonic() + 0.15, 0, config, others=others)
-    every = [(start, cost), *others]
-    cheapest = sorted(range(len(every)), key=lambda k: every[k][1])[:racers]
-    assert _same(by_turn[0], [every[k][0] for k in sorted(cheapest)])
-    assert len(by_turn[1]) == chains
-    began = [ReinsertResult(every[k][0], every[k][1], 0) for k in sorted(cheapest)]
-    met = turns._met(began, ended[0], config.behind)
-    going_on = sorted(range(len(met)), key=lambda k: met[k].cost)[:chains]
-    assert _same(by_turn[1], [met[k].best for k in sorted(going_on)])
-    _assert_valid(ctx, found.best, found.cost)
-
-
-@pytest.mark.parametrize(("chains", "race"), [(1, 2), (2, 2), (1, 3), (2, 1)])
-def test_a_larger_fleet_races_in_turns_of_its_own_and_the_cheapest_go_on(
-    chains: int, race: int, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    """In a fleet above ``race_at_once_max_robots``, a first turn of ``race_least_s`` at
-    least starts a race in turns: the cheapest ``race`` times ``chains`` starts, ``chains``
-    a turn, cheapest first, each turn from starts of its own (no meeting between them);
-    the turn after them goes on from the cheapest ``chains`` of all that those turns
-    ended with, in the order they ran. With ``race`` 1 nothing races: the first turn
-    starts from the cheapest starts in the order given, the next from their meeting."""
+    """A first turn of ``race_least_s`` at least starts a race: the cheapest ``race`` times
+    ``chains`` starts (as many as there are at most), ``chains`` a turn, cheapest first,
+    each turn from starts of its own (no meeting between them); the turn after them goes
+    on from the cheapest ``chains`` of all that those turns ended with, in the order they
+    ran. With ``race`` 1, a shorter first turn or no more starts than chains, nothing
+    races: the first turn starts from the cheapest starts in the order given, the next
+    from their meeting."""
     ctx, start, cost = _wh50()
     every = [(start, cost), *planned_starts(ctx, 4, 0, np.inf)]  # five starts
     by_turn: list[list[Assignments]] = []
     ended: list[list[ReinsertResult]] = []
 
+    races = race > 1 and turn_s >= 0.05 and len(every) > chains  # 0.05: race_least_s
+
     def recorded(ctx, starts, until, seed, cooling, pool, stop):
         by_turn.append(starts)
-        if race > 1 and len(by_turn) == 2:  # the second turn finds nothing: its starts back
+        if races and len(by_turn) == 2:  # the race's second turn finds nothing: starts back
             ended.append([ReinsertResult(a, cost_of[id(a)], 0) for a in starts])
         else:
             ended.append(turns_reinsertion(ctx, starts, until, seed, cooling, pool, stop))
@@ -403,25 +367,23 @@ def test_a_larger_fleet_races_in_turns_of_its_own_and_the_cheapest_go_on(
 
     cost_of = {id(answer): of for answer, of in every}
     monkeypatch.setattr(turns, "_reinsertion", recorded)
-    config = TurnsConfig(
-        turn_s=0.05, turn_share=1.0, chains=chains, race=race, race_least_s=0.05,
-        race_at_once_max_robots=49,
-    )  # fmt: skip
+    config = TurnsConfig(turn_s=turn_s, turn_share=1.0, chains=chains, race=race, race_least_s=0.05)
     found = take_turns(ctx, start, cost, time.monotonic() + 0.4, 0, config, others=every[1:])
     by_cost = sorted(range(len(every)), key=lambda k: every[k][1])
-    if race == 1:
+    if not races:
         assert _same(by_turn[0], [every[k][0] for k in sorted(by_cost[:chains])])
         began = [ReinsertResult(every[k][0], every[k][1], 0) for k in sorted(by_cost[:chains])]
         met = turns._met(began, ended[0], config.behind)
         assert _same(by_turn[1], [line.best for line in met])
     else:
-        assert len(by_turn) > race
-        for turn in range(race):
-            racers = by_cost[turn * chains : (turn + 1) * chains]
+        racing = -(-min(race * chains, len(every)) // chains)  # turns of the race
+        assert len(by_turn) > racing
+        for turn in range(racing):
+            racers = by_cost[turn * chains : min((turn + 1) * chains, race * chains)]
             assert _same(by_turn[turn], [every[k][0] for k in racers])
-        raced = [line for lines in ended[:race] for line in lines]
+        raced = [line for lines in ended[:racing] for line in lines]
         going_on = sorted(range(len(raced)), key=lambda k: raced[k].cost)[:chains]
-        assert _same(by_turn[race], [raced[k].best for k in sorted(going_on)])
+        assert _same(by_turn[racing], [raced[k].best for k in sorted(going_on)])
     _assert_valid(ctx, found.best, found.cost)
 
 
