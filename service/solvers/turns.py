@@ -272,16 +272,16 @@ def take_turns(
                 break
             if races and turns == 0:
                 waiting = _racing_in_turns(config, chains, lineages)
-            if waiting:
+            racing = bool(waiting)  # a turn of the race
+            if racing:
                 began_from, waiting = waiting[:chains], waiting[chains:]
             else:
                 began_from = _as_many(lineages, chains)
             starts = [line.best for line in began_from]
             ended = _reinsertion(ctx, starts, until, seed + turns, cooling, pool, stop)
-            if raced or waiting:  # a turn of the race: every racer so far, unmet
+            if racing:  # every racer so far, unmet; the cheapest go on once none wait
                 raced += ended
-                lineages = raced
-                raced = raced if waiting else []
+                lineages, raced = raced, (raced if waiting else [])
             elif config.meet_stalled:
                 lineages = _met(began_from, ended, config.behind)
             else:
