@@ -263,7 +263,6 @@ def take_turns(
     most = config.chains or max(_chains(ctx, held, available_cores()), 1)
     races = turn_s >= config.race_least_s  # the first lineages race (see RACE)
     waiting: list[ReinsertResult] = []  # starts that race in turns of their own, still to run
-    raced: list[ReinsertResult] = []  # ... and what the turns that raced ended with so far
     with ThreadPoolExecutor(most) if most > 1 else nullcontext() as pool:
         while (began := time.monotonic()) < deadline and not (stop and stop.is_set()):
             until = min(deadline, began + turn_s)
@@ -279,9 +278,8 @@ def take_turns(
                 began_from = _as_many(lineages, chains)
             starts = [line.best for line in began_from]
             ended = _reinsertion(ctx, starts, until, seed + turns, cooling, pool, stop)
-            if racing:  # every racer so far, unmet; the cheapest go on once none wait
-                raced += ended
-                lineages, raced = raced, (raced if waiting else [])
+            if racing:  # every racer so far, unmet (the race starts at turn 0); the cheapest
+                lineages = ended if turns == 0 else lineages + ended  # go on once none wait
             elif config.meet_stalled:
                 lineages = _met(began_from, ended, config.behind)
             else:
