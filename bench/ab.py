@@ -22,7 +22,8 @@ world (``bench.anytime.REFERENCES``), and every run of the comparison.
 service.solvers.portfolio.MID_LNS_SHARE=0.5 --worlds wh_two_way:25 --budget 1`` prints
 per family the mean cost ratio and delay ratio of each variant, B's gain over A (with a 95 %
 interval where there are five worlds or more: an interval that holds 0 is no evidence either
-way), how many runs A won and lost and how many each proved optimal, and writes
+way), how many runs A won and lost and how many each proved optimal, then how many runs
+at their spread would bound a gain of RESOLVE_GAIN (0.003), and writes
 ``rows.json`` and ``tables.md`` under ``--out``. ``--sets wh_25 geo_dense_25`` adds
 conformance sets, measured against their proven optima (``--worlds`` with no kind: the sets
 alone).
@@ -58,12 +59,26 @@ from bench.cases import (
 from bench.report import MODEL_STORE, cost_ratio, delay_ratio, jsonable, machine_info, nanmean
 from service.memory import settle
 
-__all__ = ["Config", "Setting", "main", "paired_interval", "parse_setting", "run", "table"]
+__all__ = [
+    "Config",
+    "Setting",
+    "main",
+    "paired_interval",
+    "parse_setting",
+    "run",
+    "runs_to_resolve",
+    "table",
+]
 
 VARIANTS = ("A", "B")
 INTERVAL_LEVEL = 0.95  # of the paired bootstrap interval of B - A (see paired_interval)
 RESAMPLES = 4000  # its bootstrap resamples
 MIN_WORLDS = 5  # ... and the worlds it takes at least (see paired_interval)
+# The gain the table's last line says how many runs it would take to bound (see
+# runs_to_resolve): the size of most changes measured since session 60. Pairs' cost ratios
+# differ by 0.040 (sd) at 250 robots and 1 s, 0.020-0.026 at 100 robots and at 5 s (session
+# 72), so a 24-run comparison bounds only gains of ~0.016 at 250 robots.
+RESOLVE_GAIN = 0.003
 
 
 @dataclass(frozen=True)
@@ -193,7 +208,8 @@ def table(rows: Sequence[dict[str, Any]]) -> str:
     the best known at the end (every run of the comparison included; a conformance
     problem's proven optimum), B's mean cost ratio minus A's over their runs with its
     bootstrap interval (:func:`paired_interval`), the runs where A cost less or more than
-    B, and each variant's runs proven optimal."""
+    B, and each variant's runs proven optimal; then, where all runs bound an interval, how
+    many runs at their spread would bound a gain of RESOLVE_GAIN (:func:`runs_to_resolve`)."""
     best: dict[str, float] = {}
     for r in rows:
         best[r["name"]] = min(best.get(r["name"], r["ref_cost"]), r["ref_cost"], r["cost"])
@@ -214,6 +230,7 @@ def table(rows: Sequence[dict[str, Any]]) -> str:
         "| family | runs | A | B | B - A (95 % interval) | A cheaper / dearer | proven A / B |",
         "|---|---|---|---|---|---|---|",
     ]
+    needed = math.nan
     for family, of in ratios.items():
         cells = [
             f"{nanmean([c for c, _ in of[v]]):.4f} / {nanmean([d for _, d in of[v]]):.3f}"
@@ -227,13 +244,33 @@ def table(rows: Sequence[dict[str, Any]]) -> str:
             gains[name].append(cost_ratio(best[name], c["B"]) - cost_ratio(best[name], c["A"]))
         every = [g for of_world in gains.values() for g in of_world]
         mean, (low, high) = nanmean(every), paired_interval(list(gains.values()))
+        if family == "all":
+            needed = runs_to_resolve(list(gains.values()))
         shift = f"{mean:+.4f}" + (f" ({low:+.4f}, {high:+.4f})" if math.isfinite(low) else "")
         found = f"{proven[family]['A']} / {proven[family]['B']}"
         lines.append(
             f"| {family} | {len(of['A'])} | {cells[0]} | {cells[1]} | {shift} | {wins} / {losses}"
             f" | {found} |"
         )
+    if math.isfinite(needed):
+        lines.append(
+            f"\nTo bound a gain of {RESOLVE_GAIN} ({INTERVAL_LEVEL:.0%} interval of that"
+            f" half-width) at these runs' spread: ~{math.ceil(needed)} runs."
+        )
     return "\n".join(lines)
+
+
+def runs_to_resolve(gains: Sequence[Sequence[float]], gain: float = RESOLVE_GAIN) -> float:
+    """How many runs (B - A per run, ``gains`` grouped by world as :func:`paired_interval`)
+    an interval of half-width ``gain`` would take at the spread these runs show: the runs
+    times the square of (their interval's half-width / ``gain``), as an interval narrows
+    with the square root of the worlds (nan where these runs bound none). It tells a
+    comparison whose interval holds 0 how far it is from telling the variants apart."""
+    low, high = paired_interval(gains)
+    if not math.isfinite(low):
+        return math.nan
+    runs = sum(len(g) for g in gains)
+    return runs * ((high - low) / 2 / gain) ** 2
 
 
 def paired_interval(

@@ -7,7 +7,15 @@ import math
 import pytest
 
 import bench.ab as ab
-from bench.ab import Config, Setting, applied, paired_interval, parse_setting, table
+from bench.ab import (
+    Config,
+    Setting,
+    applied,
+    paired_interval,
+    parse_setting,
+    runs_to_resolve,
+    table,
+)
 from service.solvers import portfolio, turns
 from service.solvers.turns import TurnsConfig
 
@@ -79,6 +87,32 @@ def test_the_table_bounds_b_minus_a_where_it_has_enough_worlds() -> None:
     (w,) = [line for line in table(rows).splitlines() if line.startswith("| w |")]
     assert "| -0.1000 (-0.1000, -0.1000) | 6 / 0 |" not in w  # A is the dearer one here
     assert "| +0.1000 (+0.1000, +0.1000) | 0 / 6 |" in w
+
+
+def test_the_runs_to_resolve_a_gain_grow_with_the_square_of_the_spread() -> None:
+    gains = [[0.01, -0.02], [0.03], [-0.01, 0.0], [0.02], [0.0, 0.01, 0.04]]
+    low, high = paired_interval(gains)
+    needed = runs_to_resolve(gains, 0.003)
+    assert needed == pytest.approx(9 * ((high - low) / 2 / 0.003) ** 2)
+    assert runs_to_resolve(gains, 0.006) == pytest.approx(needed / 4)  # twice the gain
+    wider = [[2 * g for g in world] for world in gains]  # twice the spread
+    assert runs_to_resolve(wider, 0.003) == pytest.approx(4 * needed)
+    assert math.isnan(runs_to_resolve(gains[:4], 0.003))  # four worlds bound nothing
+
+
+def test_the_table_says_how_many_runs_would_bound_a_small_gain() -> None:
+    costs = [(10.0, 9.0), (10.0, 10.5), (10.0, 9.8), (10.0, 10.1), (10.0, 9.6), (10.0, 10.0)]
+    rows = [
+        row
+        for k, (a, b) in enumerate(costs)
+        for row in (_row(f"w/{k}", 0, "A", a), _row(f"w/{k}", 0, "B", b))
+    ]
+    best = [min(a, b) for a, b in costs]  # each world's best is one of its two runs
+    gains = [[best[k] / b - best[k] / a] for k, (a, b) in enumerate(costs)]  # B - A
+    expected = math.ceil(runs_to_resolve(gains))
+    last = table(rows).splitlines()[-1]
+    assert last.endswith(f"~{expected} runs.") and "0.003" in last
+    assert "runs." not in table(rows[:4])  # two worlds: no interval, no count
 
 
 def test_the_interval_resamples_worlds_and_holds_the_mean() -> None:
