@@ -141,6 +141,11 @@ BEHIND = 0.015
 #   13; ``--seed 900000`` 0.9951 / 0.9948, -0.0003 (-0.0039, +0.0035), 11 / 9; ``--seed
 #   600000`` 0.9936 / 0.9941 (the 100-robot kinds), 8 / 15. In turns at every size, then: no
 #   worse where racing at once paid, and one way to race instead of two.
+# - Session 72, as shipped against none on more worlds (``--seed 400000``: the 250-robot kinds
+#   above and wh_two_way, wh_two_lane, floor_dense, wh_mixed of 100, six worlds, two seeds; 96
+#   pairs, more than a 24-pair run resolves): 0.9886 / 0.9844 (none), -0.0042 (-0.0097,
+#   +0.0027) for none, 37 / 58, every 250-robot kind for racing (wh_two_way and wh_two_lane
+#   intervals below 0); floor_dense 100 on twenty worlds even (0.9925 / 0.9912).
 # Racing three lineages a core from six plans (``race`` 3, ``portfolio.PLANNED_ORDERS`` 6;
 # racing at once at 100 robots, in turns at 250), 5 s, session 70's first kinds: even, 0.9843 /
 # 0.9839, -0.0005 (-0.0061, +0.0041). At 1 s in turns (``race_least_s`` 0.2: two of the ~4
